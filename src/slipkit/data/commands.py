@@ -1,0 +1,40 @@
+"""``slipkit import`` and ``slipkit info``."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from hydra.utils import instantiate
+from omegaconf import DictConfig
+
+from slipkit.data.dataset import Dataset
+from slipkit.data.io import load_dataset, save_dataset
+from slipkit.data.summary import summarize, summary_dict
+from slipkit.errors import SourceFormatError
+
+
+def import_main(cfg: DictConfig) -> Path:
+    """Read ``cfg.path`` with the importer ``cfg.source`` and write ``cfg.out``."""
+    reader: Callable[..., Dataset] = instantiate(cfg.source)
+    src = Path(str(cfg.path))
+    if not src.exists():
+        raise SourceFormatError(f"{src}: no such file or folder (path=...)")
+    dataset = reader(src)
+    out = save_dataset(dataset, Path(str(cfg.out)), overwrite=bool(cfg.overwrite))
+    print(summarize(load_dataset(out)))
+    print(out)
+    return out
+
+
+def info_main(cfg: DictConfig) -> dict[str, Any]:
+    """Print the summary of the dataset folder ``cfg.dataset``."""
+    dataset = load_dataset(Path(str(cfg.dataset)), verify=bool(cfg.verify))
+    info = summary_dict(dataset)
+    if cfg.json:
+        print(json.dumps(info, indent=2, default=str))
+    else:
+        print(summarize(dataset))
+    return info

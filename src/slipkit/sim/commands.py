@@ -1,0 +1,31 @@
+"""``slipkit simulate scene=<name> n_trials=<n> seed=<s> out=<dir>``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+
+from slipkit.data.io import save_dataset
+from slipkit.data.summary import summarize
+from slipkit.sim.core import Scene
+
+
+def build_scene(scene_cfg: DictConfig) -> Scene:
+    """A :class:`Scene` from a ``configs/scene/*.yaml`` node (model via ``instantiate``)."""
+    effects: Any = OmegaConf.to_container(scene_cfg.get("effects") or {}, resolve=True)
+    return Scene(name=str(scene_cfg.name), model=instantiate(scene_cfg.model), effects=effects)
+
+
+def simulate_main(cfg: DictConfig) -> Path:
+    """Simulate ``cfg.n_trials`` trials of ``cfg.scene`` and write the dataset to ``cfg.out``."""
+    scene = build_scene(cfg.scene)
+    config = OmegaConf.to_container(cfg.scene, resolve=True)
+    dataset = scene.simulate(int(cfg.n_trials), int(cfg.seed), progress=bool(cfg.progress), config=config)
+    out = save_dataset(dataset, Path(str(cfg.out)), overwrite=bool(cfg.overwrite))
+    if cfg.summary:
+        print(summarize(dataset))
+    print(out)
+    return out

@@ -1,0 +1,1 @@
+"""Scene models, one module per sensor family; built from ``configs/scene/*.yaml``."""
