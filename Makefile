@@ -22,7 +22,7 @@ $(STAMP): pyproject.toml
 install: $(STAMP) ## create .venv and install slipkit with its dev tools
 
 demo: $(STAMP) ## run the main job on the built-in default data
-	$(BIN)/python -m slipkit.demo
+	$(BIN)/slipkit demo
 
 test: $(STAMP) ## run the default test suite (no slow tests)
 	$(BIN)/python -m pytest -m "not slow" -q

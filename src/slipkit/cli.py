@@ -16,6 +16,7 @@ from typing import Any
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "import": ("slipkit.data.commands:import_main", "convert a recording (source=...) into a dataset folder"),
     "info": ("slipkit.data.commands:info_main", "print a dataset's summary (dataset=<folder>)"),
+    "demo": ("slipkit.demo:demo_main", "the main job on built-in defaults: simulate scenes, import real data, summarise"),
     "simulate": ("slipkit.sim.commands:simulate_main", "simulate a scene into a dataset folder (scene=...)"),
 }
 

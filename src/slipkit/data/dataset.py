@@ -124,11 +124,17 @@ class LabelSpec:
     classes: tuple[str, ...] | None = None
     description: str = ""
 
+    def __post_init__(self) -> None:
+        if self.classes is not None:
+            object.__setattr__(self, "classes", tuple(self.classes))
+        if not self.description:
+            object.__setattr__(self, "description", STANDARD_LABELS.get(self.name, ""))
+
     def to_json(self) -> dict[str, Any]:
         return {
             "unit": self.unit,
             "classes": None if self.classes is None else list(self.classes),
-            "description": self.description or STANDARD_LABELS.get(self.name, ""),
+            "description": self.description,
         }
 
     @classmethod

@@ -59,6 +59,20 @@ def _check_fraction(name: str, value: float) -> None:
         raise ValueError(f"{name} must be in [0, 1); got {value}")
 
 
+def _check_enough(n: int, unit: str, test_size: float, val_size: float) -> None:
+    """Refuse, with a clear message, a split that would leave a side empty.
+
+    Counts follow scikit-learn's rule (test and val sizes rounded up).
+    """
+    n_test = int(np.ceil(test_size * n))
+    n_val = int(np.ceil(val_size * (n - n_test)))
+    if n - n_test - n_val < 1 or (test_size and n_test < 1):
+        raise ValueError(
+            f"cannot split {n} {unit} into test {test_size:.0%} and val {val_size:.0%} "
+            "with at least one on every side; use fewer or smaller sides, or more data"
+        )
+
+
 def split_by_trial(
     dataset: Dataset,
     *,
@@ -76,6 +90,7 @@ def split_by_trial(
     _check_fraction("val_size", val_size)
     ids = np.asarray(dataset.trial_ids, dtype=object)
     strat = None if stratify is None else dataset.trials[stratify].astype(str).to_numpy()
+    _check_enough(len(ids), "trials", test_size, val_size)
     pos = np.arange(len(ids))
     tr, te = pos, pos[:0]
     if test_size:
@@ -108,6 +123,7 @@ def split_by_group(
     groups = dataset.trials[group].astype(str).to_numpy()
     if len(set(groups)) < 2:
         raise ValueError(f"cannot split by {group!r}: only one value ({groups[0]!r}) in the dataset")
+    _check_enough(len(set(groups)), f"values of {group!r}", test_size, val_size)
     tr, te = next(GroupShuffleSplit(n_splits=1, test_size=test_size, random_state=seed).split(ids, groups=groups))
     val_idx = tr[:0]
     if val_size:
@@ -149,8 +165,7 @@ def split_time_blocks(
     blocks = time_blocks(dataset, stream, block_s)
     rows = np.arange(len(blocks))
     n_blocks = int(blocks.max()) + 1 if len(blocks) else 0
-    if n_blocks < 2:
-        raise ValueError(f"stream {stream!r} holds {n_blocks} block(s) of {block_s} s; need >= 2 to split")
+    _check_enough(n_blocks, f"blocks of {block_s} s in stream {stream!r}", test_size, val_size)
     tr, te = next(GroupShuffleSplit(n_splits=1, test_size=test_size, random_state=seed).split(rows, groups=blocks))
     va = tr[:0]
     if val_size:

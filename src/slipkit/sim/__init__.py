@@ -13,6 +13,7 @@ from slipkit.sim.core import (
     register_effect,
     sample_times,
 )
+from slipkit.sim import effects as _effects  # noqa: F401  (registers every effect)
 
 __all__ = [
     "EFFECTS",

@@ -1,0 +1,74 @@
+"""Simulator throughput per scene on one core: scalar samples and frames per second.
+
+Run: ``make bench`` or ``.venv/bin/python benchmarks/bench_simulate.py [--trials N]``.
+Samples count every channel value of every stream row (ground-truth streams included,
+as the simulator computes them too); frames count stream rows. The FSR and SlipTack
+scenes must generate >= 1e6 samples/s on one core (issue 3); the table prints each
+scene's ratio to that target side by side.
+"""
+
+from __future__ import annotations
+
+import os
+
+# One core: pin BLAS/OpenMP pools before numpy loads.
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import time  # noqa: E402
+
+from hydra import compose, initialize_config_dir  # noqa: E402
+
+from slipkit import config_dir  # noqa: E402
+from slipkit.sim.commands import build_scene  # noqa: E402
+
+TARGET = 1e6  # samples per second, FSR and SlipTack scenes
+MUST_MEET = ("fsr_probe_slide", "sliptack_pull", "sliptack_drop")
+
+
+def measure(scene_name: str, n_trials: int, repeats: int) -> dict[str, float]:
+    """Best-of-``repeats`` wall time to simulate ``n_trials`` trials (dataset assembly included)."""
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        cfg = compose(config_name="simulate", overrides=[f"scene={scene_name}"])
+    scene = build_scene(cfg.scene)
+    scene.simulate(1, seed=123)  # warm-up: imports, caches
+    best = float("inf")
+    ds = None
+    for r in range(repeats):
+        start = time.perf_counter()
+        ds = scene.simulate(n_trials, seed=r)
+        best = min(best, time.perf_counter() - start)
+    assert ds is not None
+    samples = sum(t.shape[0] * (t.shape[1] - 2) for t in ds.tables.values())
+    frames = sum(len(t) for t in ds.tables.values())
+    return {"seconds": best, "samples": samples, "frames": frames}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--trials", type=int, default=10)
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+    scenes = sorted(p.stem for p in (config_dir() / "scene").glob("*.yaml"))
+    print(f"{'scene':<22}{'trials':>7}{'samples':>12}{'frames':>10}{'s':>8}{'Msamples/s':>12}{'kframes/s':>11}{'vs 1e6/s':>10}")
+    failed = []
+    for name in scenes:
+        m = measure(name, args.trials, args.repeats)
+        rate = m["samples"] / m["seconds"]
+        ratio = rate / TARGET
+        flag = ""
+        if name in MUST_MEET:
+            flag = " ok" if ratio >= 1 else " MISSED"
+            if ratio < 1:
+                failed.append(name)
+        print(
+            f"{name:<22}{args.trials:>7}{m['samples']:>12.0f}{m['frames']:>10.0f}{m['seconds']:>8.3f}"
+            f"{rate / 1e6:>12.2f}{m['frames'] / m['seconds'] / 1e3:>11.1f}{ratio:>9.1f}x{flag}"
+        )
+    if failed:
+        raise SystemExit(f"below {TARGET:.0e} samples/s on one core: {failed}")
+
+
+if __name__ == "__main__":
+    main()
