@@ -51,7 +51,9 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
     scenes = sorted(p.stem for p in (config_dir() / "scene").glob("*.yaml"))
-    print(f"{'scene':<22}{'trials':>7}{'samples':>12}{'frames':>10}{'s':>8}{'Msamples/s':>12}{'kframes/s':>11}{'vs 1e6/s':>10}")
+    print(
+        f"{'scene':<22}{'trials':>7}{'samples':>12}{'frames':>10}{'s':>8}{'Msamples/s':>12}{'kframes/s':>11}{'vs 1e6/s':>10}"
+    )
     failed = []
     for name in scenes:
         m = measure(name, args.trials, args.repeats)

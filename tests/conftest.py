@@ -22,7 +22,9 @@ def shared_data() -> Path:
     """The real public recordings; the test is skipped cleanly when they are absent."""
     path = shared_data_dir()
     if path is None:
-        pytest.skip("real recordings not found (set SLIPKIT_DATA or place ../shared/data)")
+        pytest.skip(
+            "real recordings not found (set SLIPKIT_DATA or place ../shared/data)"
+        )
     return path
 
 

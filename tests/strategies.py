@@ -9,10 +9,17 @@ from hypothesis import strategies as st
 from slipkit.data import Dataset, LabelSpec, StreamSpec, Trial
 
 FORCE = StreamSpec(
-    "force", ("fx", "fy", "fz"), {"fx": "N", "fy": "N", "fz": "N"}, rate_hz=300.0, description="force plate"
+    "force",
+    ("fx", "fy", "fz"),
+    {"fx": "N", "fy": "N", "fz": "N"},
+    rate_hz=300.0,
+    description="force plate",
 )
 EVENTS = StreamSpec(
-    "events", ("x", "y", "polarity"), {"x": "px", "y": "px", "polarity": "1"}, kind="events"
+    "events",
+    ("x", "y", "polarity"),
+    {"x": "px", "y": "px", "polarity": "1"},
+    kind="events",
 )
 LABELS = {
     "slip_onset_s": LabelSpec("slip_onset_s", unit="s"),
@@ -33,7 +40,12 @@ def make_dataset(
     for i in range(n_trials):
         t = np.arange(n_frames) / 300.0
         force = pd.DataFrame(
-            {"t": t, "fx": rng.normal(size=n_frames), "fy": rng.normal(size=n_frames), "fz": 1.0 + t}
+            {
+                "t": t,
+                "fx": rng.normal(size=n_frames),
+                "fy": rng.normal(size=n_frames),
+                "fz": 1.0 + t,
+            }
         )
         streams = {"force": force}
         if with_events:
@@ -51,7 +63,10 @@ def make_dataset(
             Trial(
                 f"trial-{i:03d}",
                 streams,
-                labels={"slip_onset_s": onset, "slip_class": ["linear", "rotational"][i % 2]},
+                labels={
+                    "slip_onset_s": onset,
+                    "slip_class": ["linear", "rotational"][i % 2],
+                },
                 meta={"object": f"obj{i % n_objects}"},
             )
         )
@@ -72,7 +87,9 @@ def trial_layouts(draw: st.DrawFn) -> tuple[list[int], list[str], float]:
     """Per-trial frame counts, object names and a block length (s) for split properties."""
     n = draw(st.integers(2, 12))
     frames = draw(st.lists(st.integers(1, 400), min_size=n, max_size=n))
-    objects = draw(st.lists(st.sampled_from(["a", "b", "c", "d"]), min_size=n, max_size=n))
+    objects = draw(
+        st.lists(st.sampled_from(["a", "b", "c", "d"]), min_size=n, max_size=n)
+    )
     block_s = draw(st.floats(0.05, 2.0))
     return frames, objects, block_s
 
@@ -82,10 +99,20 @@ def dataset_from_layout(frames: list[int], objects: list[str]) -> Dataset:
     trials = [
         Trial(
             f"t{i}",
-            {"force": pd.DataFrame({"t": np.arange(n) / 300.0, "fx": 0.0, "fy": 0.0, "fz": float(i)})},
+            {
+                "force": pd.DataFrame(
+                    {"t": np.arange(n) / 300.0, "fx": 0.0, "fy": 0.0, "fz": float(i)}
+                )
+            },
             labels={"slip_onset_s": float("nan"), "slip_class": "linear"},
             meta={"object": obj},
         )
         for i, (n, obj) in enumerate(zip(frames, objects, strict=True))
     ]
-    return Dataset.from_trials(trials, sensor="biotac", streams={"force": FORCE}, labels=LABELS, groups=("object",))
+    return Dataset.from_trials(
+        trials,
+        sensor="biotac",
+        streams={"force": FORCE},
+        labels=LABELS,
+        groups=("object",),
+    )

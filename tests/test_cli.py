@@ -7,10 +7,10 @@ import sys
 from pathlib import Path
 
 import pytest
+from tests.strategies import make_dataset
 
 from slipkit.cli import SUBCOMMANDS, main
 from slipkit.data import save_dataset
-from tests.strategies import make_dataset
 
 
 def test_usage_lists_every_subcommand(capsys: pytest.CaptureFixture[str]) -> None:
@@ -29,7 +29,9 @@ def test_unknown_subcommand_exits_2(capsys: pytest.CaptureFixture[str]) -> None:
     assert "unknown subcommand 'fly'" in capsys.readouterr().err
 
 
-def test_info_prints_summary(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_info_prints_summary(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """`slipkit info dataset=...` prints trials, streams with rates and class counts."""
     path = save_dataset(make_dataset(n_trials=4), tmp_path / "ds")
     main(["info", f"dataset={path}"])
@@ -50,7 +52,9 @@ def test_info_json(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert 300.0 == info["streams"]["force"]["rate_hz"]
 
 
-def test_bad_dataset_gives_clear_error_not_traceback(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_bad_dataset_gives_clear_error_not_traceback(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """A folder that is not a dataset exits 2 with the file named and no traceback."""
     with pytest.raises(SystemExit) as exc:
         main(["info", f"dataset={tmp_path}"])
@@ -64,6 +68,11 @@ def test_console_script_runs_in_a_subprocess(tmp_path: Path) -> None:
     """The installed `slipkit` entry point runs `info` end to end in a fresh process."""
     path = save_dataset(make_dataset(n_trials=2), tmp_path / "ds")
     exe = Path(sys.executable).with_name("slipkit")
-    result = subprocess.run([str(exe), "info", f"dataset={path}"], capture_output=True, text=True, check=False)
+    result = subprocess.run(
+        [str(exe), "info", f"dataset={path}"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     assert 0 == result.returncode, result.stderr
     assert "sensor    biotac" in result.stdout

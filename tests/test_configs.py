@@ -50,9 +50,18 @@ def test_group_option_instantiates(group: str, option: str) -> None:
 
 
 def test_wheel_ships_the_config_tree(tmp_path: Path) -> None:
-    """configs/ is declared to ship in the wheel as slipkit/configs (hatch force-include)."""
-    import tomllib
+    """A built wheel carries every file of configs/ as slipkit/configs/."""
+    import subprocess
+    import sys
+    import zipfile
 
-    pyproject = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())
-    include = pyproject["tool"]["hatch"]["build"]["targets"]["wheel"]["force-include"]
-    assert {"configs": "slipkit/configs"} == include
+    root = Path(__file__).resolve().parents[1]
+    subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(tmp_path), str(root)],
+        check=True,
+        capture_output=True,
+    )
+    (wheel,) = tmp_path.glob("slipkit-*.whl")
+    names = set(zipfile.ZipFile(wheel).namelist())
+    expected = {f"slipkit/configs/{p.relative_to(CONFIGS).as_posix()}" for p in CONFIGS.rglob("*.yaml")}
+    assert expected <= names

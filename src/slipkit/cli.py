@@ -14,16 +14,30 @@ from typing import Any
 
 #: subcommand -> ("module:function", one-line help). Each function takes the composed DictConfig.
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
-    "import": ("slipkit.data.commands:import_main", "convert a recording (source=...) into a dataset folder"),
-    "info": ("slipkit.data.commands:info_main", "print a dataset's summary (dataset=<folder>)"),
-    "demo": ("slipkit.demo:demo_main", "the main job on built-in defaults: simulate scenes, import real data, summarise"),
-    "simulate": ("slipkit.sim.commands:simulate_main", "simulate a scene into a dataset folder (scene=...)"),
+    "import": (
+        "slipkit.data.commands:import_main",
+        "convert a recording (source=...) into a dataset folder",
+    ),
+    "info": (
+        "slipkit.data.commands:info_main",
+        "print a dataset's summary (dataset=<folder>)",
+    ),
+    "demo": (
+        "slipkit.demo:demo_main",
+        "the main job on built-in defaults: simulate scenes, import real data, summarise",
+    ),
+    "simulate": (
+        "slipkit.sim.commands:simulate_main",
+        "simulate a scene into a dataset folder (scene=...)",
+    ),
 }
 
 
 def _usage() -> str:
     width = max(map(len, SUBCOMMANDS))
-    rows = "\n".join(f"  {name:<{width}}  {text}" for name, (_, text) in SUBCOMMANDS.items())
+    rows = "\n".join(
+        f"  {name:<{width}}  {text}" for name, (_, text) in SUBCOMMANDS.items()
+    )
     return (
         "usage: slipkit <subcommand> [key=value ...] [-m] [--cfg job] [--help]\n\n"
         f"subcommands:\n{rows}\n\n"
@@ -69,7 +83,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     saved = sys.argv
     sys.argv = [f"slipkit {sub}", *rest]
     try:
-        hydra.main(version_base="1.3", config_path=str(config_dir()), config_name=sub)(run)()
+        hydra.main(version_base="1.3", config_path=str(config_dir()), config_name=sub)(
+            run
+        )()
     finally:
         sys.argv = saved
 

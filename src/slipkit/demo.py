@@ -27,20 +27,36 @@ def demo_main(cfg: DictConfig) -> list[dict[str, Any]]:
     rows: list[dict[str, Any]] = []
     for scene_name in tqdm(list(cfg.scenes), desc="simulate", unit="scene"):
         start = time.perf_counter()
-        scene_cfg = compose(config_name="simulate", overrides=[f"scene={scene_name}"]).scene
+        scene_cfg = compose(
+            config_name="simulate", overrides=[f"scene={scene_name}"]
+        ).scene
         scene = build_scene(scene_cfg)
-        dataset = scene.simulate(int(cfg.n_trials), int(cfg.seed), config=OmegaConf.to_container(scene_cfg, resolve=True))
+        dataset = scene.simulate(
+            int(cfg.n_trials),
+            int(cfg.seed),
+            config=OmegaConf.to_container(scene_cfg, resolve=True),
+        )
         path = save_dataset(dataset, out / scene_name, overwrite=bool(cfg.overwrite))
         rows.append(_row(path, "simulated", time.perf_counter() - start))
 
     root = Path(str(cfg.data_root))
-    present = {src: root / sub for src, sub in cfg.real.items() if (root / sub).exists()}
+    present = {
+        src: root / sub for src, sub in cfg.real.items() if (root / sub).exists()
+    }
     if not present:
-        print(f"real recordings not found under {root} (set SLIPKIT_DATA); skipping the import stage")
+        print(
+            f"real recordings not found under {root} (set SLIPKIT_DATA); skipping the import stage"
+        )
     for source, src_path in tqdm(list(present.items()), desc="import", unit="source"):
         start = time.perf_counter()
-        reader = instantiate(compose(config_name="import", overrides=[f"source={source}", "path=x", "out=x"]).source)
-        path = save_dataset(reader(src_path), out / source, overwrite=bool(cfg.overwrite))
+        reader = instantiate(
+            compose(
+                config_name="import", overrides=[f"source={source}", "path=x", "out=x"]
+            ).source
+        )
+        path = save_dataset(
+            reader(src_path), out / source, overwrite=bool(cfg.overwrite)
+        )
         rows.append(_row(path, "recorded", time.perf_counter() - start))
 
     for row in rows:

@@ -10,7 +10,14 @@ import pandas as pd
 import pytest
 
 from slipkit.data import LabelSpec, StreamSpec
-from slipkit.sim import EFFECTS, Scene, SceneState, SimulationError, phase_times, sample_times
+from slipkit.sim import (
+    EFFECTS,
+    Scene,
+    SceneState,
+    SimulationError,
+    phase_times,
+    sample_times,
+)
 
 
 class Ramp:
@@ -33,11 +40,23 @@ class Ramp:
 
     def base(self, params: Mapping[str, Any], rng: np.random.Generator) -> SceneState:
         t = sample_times(1.0, 100.0)
-        return SceneState(time={"sig": t}, signals={"sig": self.slope * t}, truth={"slip_onset_s": 0.5, **params})
+        return SceneState(
+            time={"sig": t},
+            signals={"sig": self.slope * t},
+            truth={"slip_onset_s": 0.5, **params},
+        )
 
-    def render(self, state: SceneState) -> tuple[dict[str, pd.DataFrame], dict[str, Any], dict[str, Any]]:
-        streams = {"sig": pd.DataFrame({"t": state.time["sig"], "v": state.signals["sig"]})}
-        return streams, {"slip_onset_s": state.truth["slip_onset_s"]}, {"object": state.truth["object"]}
+    def render(
+        self, state: SceneState
+    ) -> tuple[dict[str, pd.DataFrame], dict[str, Any], dict[str, Any]]:
+        streams = {
+            "sig": pd.DataFrame({"t": state.time["sig"], "v": state.signals["sig"]})
+        }
+        return (
+            streams,
+            {"slip_onset_s": state.truth["slip_onset_s"]},
+            {"object": state.truth["object"]},
+        )
 
 
 def test_unnamed_effects_are_never_called(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -46,7 +65,13 @@ def test_unnamed_effects_are_never_called(monkeypatch: pytest.MonkeyPatch) -> No
     for name in list(EFFECTS):
         real = EFFECTS[name]
 
-        def spy(state: SceneState, rng: np.random.Generator, _name: str = name, _real: Any = real, **kw: Any) -> SceneState:
+        def spy(
+            state: SceneState,
+            rng: np.random.Generator,
+            _name: str = name,
+            _real: Any = real,
+            **kw: Any,
+        ) -> SceneState:
             called.append(_name)
             return _real(state, rng, **kw)
 
@@ -71,14 +96,25 @@ def test_effects_run_in_the_listed_order() -> None:
 def test_removing_an_effect_removes_its_signature() -> None:
     """Without white_noise the ramp is exact; with it, residuals have the configured sigma."""
     clean = Scene("ramp", Ramp(), {}).simulate(1, seed=0).stream("sig")
-    noisy = Scene("ramp", Ramp(), {"white_noise": {"target": "sig", "sigma": 0.2}}).simulate(1, seed=0).stream("sig")
+    noisy = (
+        Scene("ramp", Ramp(), {"white_noise": {"target": "sig", "sigma": 0.2}})
+        .simulate(1, seed=0)
+        .stream("sig")
+    )
     np.testing.assert_array_equal(clean["t"].to_numpy(), clean["v"].to_numpy())
     assert pytest.approx(0.2, rel=0.25) == float(np.std(noisy["v"] - noisy["t"]))
 
 
 def test_same_seed_same_trials_and_trial_independent_of_count() -> None:
     """Trial i depends only on (seed, i): a 2-trial run equals the first two of a 5-trial run."""
-    scene = Scene("ramp", Ramp(), {"white_noise": {"target": "sig", "sigma": 0.1}, "dropped_frames": {"stream": "sig", "probability": 0.1}})
+    scene = Scene(
+        "ramp",
+        Ramp(),
+        {
+            "white_noise": {"target": "sig", "sigma": 0.1},
+            "dropped_frames": {"stream": "sig", "probability": 0.1},
+        },
+    )
     short, long_ = scene.simulate(2, seed=7), scene.simulate(5, seed=7)
     assert short.fingerprint() == long_.subset(short.trial_ids).fingerprint() or (
         short.stream("sig").equals(long_.subset(short.trial_ids).stream("sig"))
@@ -88,8 +124,14 @@ def test_same_seed_same_trials_and_trial_independent_of_count() -> None:
 
 def test_dropped_frames_and_jitter_keep_time_and_signal_in_step() -> None:
     """Dropping frames leaves gaps but keeps rows aligned; jitter keeps time sorted."""
-    ds = Scene("ramp", Ramp(), {"dropped_frames": {"stream": "sig", "probability": 0.3},
-                                "timestamp_jitter": {"stream": "sig", "sigma_s": 1e-4}}).simulate(1, seed=1)
+    ds = Scene(
+        "ramp",
+        Ramp(),
+        {
+            "dropped_frames": {"stream": "sig", "probability": 0.3},
+            "timestamp_jitter": {"stream": "sig", "sigma_s": 1e-4},
+        },
+    ).simulate(1, seed=1)
     table = ds.stream("sig")
     assert 40 < len(table) < 90
     assert (np.diff(table["t"].to_numpy()) >= 0).all()
@@ -105,7 +147,9 @@ def test_unknown_effect_is_named() -> None:
 def test_effect_on_missing_signal_is_named() -> None:
     """An effect pointed at a signal the scene does not produce names both."""
     with pytest.raises(SimulationError, match="'white_noise' acts on signal 'nope'"):
-        Scene("ramp", Ramp(), {"white_noise": {"target": "nope", "sigma": 1.0}}).simulate(1)
+        Scene(
+            "ramp", Ramp(), {"white_noise": {"target": "nope", "sigma": 1.0}}
+        ).simulate(1)
 
 
 def test_phase_and_sample_times() -> None:

@@ -38,13 +38,17 @@ def atomic_dir(target: Path | str, *, overwrite: bool = False) -> Iterator[Path]
     """
     target = Path(target)
     if target.exists() and not overwrite:
-        raise SlipkitError(f"{target}: already exists (pass overwrite=true to replace it)")
+        raise SlipkitError(
+            f"{target}: already exists (pass overwrite=true to replace it)"
+        )
     target.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
     try:
         yield tmp
         if target.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old-", dir=target.parent))
+            old = Path(
+                tempfile.mkdtemp(prefix=f".{target.name}.old-", dir=target.parent)
+            )
             os.replace(target, old / target.name)
             os.replace(tmp, target)
             shutil.rmtree(old, ignore_errors=True)

@@ -28,7 +28,7 @@ STREAM_KINDS: tuple[str, ...] = ("sampled", "events", "snapshot")
 
 #: Label names with a fixed meaning across slipkit (any other name is allowed).
 STANDARD_LABELS: dict[str, str] = {
-    "slip_onset_s": "true slip onset, s from the trial start (NaN: no slip)",
+    "slip_onset_s": "true slip onset, s from the trial start (NaN: no slip, or onset not recorded: the dataset's label description says which)",
     "reference_onset_s": "onset seen by a late reference sensor (e.g. object IMU), s",
     "slip_class": "class of the trial (e.g. linear / rotational / touch)",
 }
@@ -67,9 +67,13 @@ class StreamSpec:
         object.__setattr__(self, "channels", tuple(self.channels))
         object.__setattr__(self, "units", dict(self.units))
         if not self.name or "/" in self.name:
-            raise DatasetError(where, "stream names must be non-empty and contain no '/'")
+            raise DatasetError(
+                where, "stream names must be non-empty and contain no '/'"
+            )
         if not self.channels:
-            raise DatasetError(where, "field 'channels' is empty; expected >= 1 channel")
+            raise DatasetError(
+                where, "field 'channels' is empty; expected >= 1 channel"
+            )
         reserved = {"trial_id", "t"} & set(self.channels)
         if reserved:
             raise DatasetError(where, f"channel names {sorted(reserved)} are reserved")
@@ -77,16 +81,27 @@ class StreamSpec:
             raise DatasetError(where, "field 'channels' repeats a name")
         missing = [c for c in self.channels if c not in self.units]
         if missing:
-            raise DatasetError(where, f"field 'units' has no unit for channels {missing}")
+            raise DatasetError(
+                where, f"field 'units' has no unit for channels {missing}"
+            )
         if self.kind not in STREAM_KINDS:
-            raise DatasetError(where, f"field 'kind' is {self.kind!r}; expected one of {STREAM_KINDS}")
+            raise DatasetError(
+                where, f"field 'kind' is {self.kind!r}; expected one of {STREAM_KINDS}"
+            )
         if self.kind == "sampled":
-            if self.rate_hz is None or not np.isfinite(self.rate_hz) or self.rate_hz <= 0:
+            if (
+                self.rate_hz is None
+                or not np.isfinite(self.rate_hz)
+                or self.rate_hz <= 0
+            ):
                 raise DatasetError(
-                    where, f"field 'rate_hz' is {self.rate_hz!r}; a sampled stream needs a rate > 0 Hz"
+                    where,
+                    f"field 'rate_hz' is {self.rate_hz!r}; a sampled stream needs a rate > 0 Hz",
                 )
         elif self.rate_hz is not None:
-            raise DatasetError(where, f"field 'rate_hz' must be null for a {self.kind} stream")
+            raise DatasetError(
+                where, f"field 'rate_hz' must be null for a {self.kind} stream"
+            )
 
     def to_json(self) -> dict[str, Any]:
         """The manifest entry of this stream."""
@@ -99,7 +114,9 @@ class StreamSpec:
         }
 
     @classmethod
-    def from_json(cls, name: str, entry: Mapping[str, Any], where: str = "manifest.json") -> StreamSpec:
+    def from_json(
+        cls, name: str, entry: Mapping[str, Any], where: str = "manifest.json"
+    ) -> StreamSpec:
         """Build from a manifest entry, naming the missing field on error."""
         for key in ("kind", "rate_hz", "channels", "units"):
             if key not in entry:
@@ -174,7 +191,11 @@ class Trial:
 
     def duration_s(self) -> float:
         """Longest time span over the trial's streams, in seconds."""
-        spans = [float(df["t"].iloc[-1] - df["t"].iloc[0]) for df in self.streams.values() if len(df)]
+        spans = [
+            float(df["t"].iloc[-1] - df["t"].iloc[0])
+            for df in self.streams.values()
+            if len(df)
+        ]
         return max(spans, default=0.0)
 
 
@@ -182,41 +203,63 @@ def _is_numeric(series: pd.Series) -> bool:
     return pd.api.types.is_numeric_dtype(series) or pd.api.types.is_bool_dtype(series)
 
 
-def _check_table(spec: StreamSpec, table: pd.DataFrame, where: str, trial_ids: set[str]) -> pd.DataFrame:
+def _check_table(
+    spec: StreamSpec, table: pd.DataFrame, where: str, trial_ids: set[str]
+) -> pd.DataFrame:
     """Check one long stream table against its spec; return it with a clean index."""
     expected = ["trial_id", "t", *spec.channels]
     missing = [c for c in expected if c not in table.columns]
     if missing:
-        raise DatasetError(where, f"missing columns {missing}; expected columns {expected}")
+        raise DatasetError(
+            where, f"missing columns {missing}; expected columns {expected}"
+        )
     extra = [c for c in table.columns if c not in expected]
     if extra:
-        raise DatasetError(where, f"unexpected columns {extra}; the manifest declares {expected}")
+        raise DatasetError(
+            where, f"unexpected columns {extra}; the manifest declares {expected}"
+        )
     table = table.loc[:, expected].reset_index(drop=True)
     for col in ["t", *spec.channels]:
         if not _is_numeric(table[col]):
-            raise DatasetError(where, f"column '{col}' has dtype {table[col].dtype}; expected a numeric dtype")
+            raise DatasetError(
+                where,
+                f"column '{col}' has dtype {table[col].dtype}; expected a numeric dtype",
+            )
     t = table["t"].to_numpy(dtype=np.float64)
     if not np.all(np.isfinite(t)):
         row = int(np.flatnonzero(~np.isfinite(t))[0])
-        raise DatasetError(where, f"column 't' is not finite at row {row} (trial {table['trial_id'].iloc[row]!r})")
+        raise DatasetError(
+            where,
+            f"column 't' is not finite at row {row} (trial {table['trial_id'].iloc[row]!r})",
+        )
     tid = table["trial_id"].astype(str).to_numpy()
     if len(tid):
         unknown = set(np.unique(tid)) - trial_ids
         if unknown:
-            raise DatasetError(where, f"column 'trial_id' names trials not in trials.parquet: {sorted(unknown)[:5]}")
+            raise DatasetError(
+                where,
+                f"column 'trial_id' names trials not in trials.parquet: {sorted(unknown)[:5]}",
+            )
         starts = np.flatnonzero(np.r_[True, tid[1:] != tid[:-1]])
         if len(starts) != len(set(tid)):
-            raise DatasetError(where, "rows of one trial are not contiguous; expected rows grouped by 'trial_id'")
+            raise DatasetError(
+                where,
+                "rows of one trial are not contiguous; expected rows grouped by 'trial_id'",
+            )
         backwards = (tid[1:] == tid[:-1]) & (np.diff(t) < 0)
         if backwards.any():
             row = int(np.flatnonzero(backwards)[0]) + 1
             raise DatasetError(
-                where, f"column 't' decreases at row {row} (trial {tid[row]!r}); expected non-decreasing time within a trial"
+                where,
+                f"column 't' decreases at row {row} (trial {tid[row]!r}); expected non-decreasing time within a trial",
             )
         if spec.kind == "snapshot":
             counts = pd.Series(tid).value_counts()
             if (counts > 1).any():
-                raise DatasetError(where, f"snapshot stream has {int(counts.max())} rows for trial {counts.idxmax()!r}; expected 1")
+                raise DatasetError(
+                    where,
+                    f"snapshot stream has {int(counts.max())} rows for trial {counts.idxmax()!r}; expected 1",
+                )
     table["trial_id"] = table["trial_id"].astype(str)
     return table
 
@@ -268,22 +311,29 @@ class Dataset:
         trials["trial_id"] = trials["trial_id"].astype(str)
         dup = trials["trial_id"][trials["trial_id"].duplicated()]
         if len(dup):
-            raise DatasetError(twhere, f"column 'trial_id' repeats {dup.iloc[0]!r}; trial ids must be unique")
+            raise DatasetError(
+                twhere,
+                f"column 'trial_id' repeats {dup.iloc[0]!r}; trial ids must be unique",
+            )
         self.labels: dict[str, LabelSpec] = dict(labels or {})
         for col in [*self.labels, *groups]:
             if col not in trials.columns:
-                raise DatasetError(twhere, f"missing column '{col}' declared in the manifest")
+                raise DatasetError(
+                    twhere, f"missing column '{col}' declared in the manifest"
+                )
         for lab in self.labels.values():
             if lab.classes is not None:
                 values = trials[lab.name].dropna().astype(str)
                 unknown = sorted(set(values) - set(lab.classes))
                 if unknown:
                     raise DatasetError(
-                        twhere, f"column '{lab.name}' holds {unknown[:5]} outside its classes {list(lab.classes)}"
+                        twhere,
+                        f"column '{lab.name}' holds {unknown[:5]} outside its classes {list(lab.classes)}",
                     )
         if set(streams) != set(tables):
             raise DatasetError(
-                "dataset", f"streams declared {sorted(streams)} but tables given for {sorted(tables)}"
+                "dataset",
+                f"streams declared {sorted(streams)} but tables given for {sorted(tables)}",
             )
         ids = set(trials["trial_id"])
         self.sensor = str(sensor)
@@ -293,7 +343,8 @@ class Dataset:
         self.provenance: dict[str, Any] = dict(provenance or {})
         self.trials: pd.DataFrame = trials
         self.tables: dict[str, pd.DataFrame] = {
-            s: _check_table(streams[s], tables[s], sources.get(s, f"stream '{s}'"), ids) for s in streams
+            s: _check_table(streams[s], tables[s], sources.get(s, f"stream '{s}'"), ids)
+            for s in streams
         }
         self._index: dict[str, dict[str, np.ndarray]] = {}
 
@@ -317,7 +368,10 @@ class Dataset:
             rows.append({"trial_id": trial.trial_id, **trial.meta, **trial.labels})
             for s, df in trial.streams.items():
                 if s not in parts:
-                    raise DatasetError(f"trial {trial.trial_id!r}", f"stream '{s}' is not declared; declared: {sorted(streams)}")
+                    raise DatasetError(
+                        f"trial {trial.trial_id!r}",
+                        f"stream '{s}' is not declared; declared: {sorted(streams)}",
+                    )
                 part = df.copy()
                 part.insert(0, "trial_id", trial.trial_id)
                 parts[s].append(part)
@@ -330,12 +384,18 @@ class Dataset:
             if parts[s]:
                 tables[s] = pd.concat(parts[s], ignore_index=True)
             else:
-                tables[s] = pd.DataFrame({c: pd.Series([], dtype=float) for c in ["t", *spec.channels]}).assign(
-                    trial_id=pd.Series([], dtype=str)
-                )
+                tables[s] = pd.DataFrame(
+                    {c: pd.Series([], dtype=float) for c in ["t", *spec.channels]}
+                ).assign(trial_id=pd.Series([], dtype=str))
         return cls(
-            sensor=sensor, streams=streams, trials=table, tables=tables, labels=labels,
-            groups=groups, provenance=provenance, name=name,
+            sensor=sensor,
+            streams=streams,
+            trials=table,
+            tables=tables,
+            labels=labels,
+            groups=groups,
+            provenance=provenance,
+            name=name,
         )
 
     # -- access ----------------------------------------------------------------------
@@ -348,14 +408,17 @@ class Dataset:
 
     def _rows(self, stream: str) -> dict[str, np.ndarray]:
         if stream not in self._index:
-            self._index[stream] = self.tables[stream].groupby("trial_id", sort=False).indices
+            groups = self.tables[stream].groupby("trial_id", sort=False).indices
+            self._index[stream] = {str(k): np.asarray(v) for k, v in groups.items()}
         return self._index[stream]
 
     def trial(self, trial_id: str) -> Trial:
         """The trial called ``trial_id``."""
         match = self.trials.index[self.trials["trial_id"] == trial_id]
         if len(match) == 0:
-            raise KeyError(f"no trial {trial_id!r} in dataset {self.name or self.sensor!r}")
+            raise KeyError(
+                f"no trial {trial_id!r} in dataset {self.name or self.sensor!r}"
+            )
         return self._make_trial(self.trials.iloc[int(match[0])])
 
     __getitem__ = trial
@@ -369,9 +432,17 @@ class Dataset:
                 continue
             streams[s] = table.iloc[idx].drop(columns="trial_id").reset_index(drop=True)
         labels = {k: row[k] for k in self.labels}
-        meta = {k: row[k] for k in row.index if k != "trial_id" and k not in self.labels}
+        meta = {
+            k: row[k] for k in row.index if k != "trial_id" and k not in self.labels
+        }
         meta["sensor"] = self.sensor
-        return Trial(trial_id=tid, streams=streams, labels=labels, meta=meta, specs=dict(self.streams))
+        return Trial(
+            trial_id=tid,
+            streams=streams,
+            labels=labels,
+            meta=meta,
+            specs=dict(self.streams),
+        )
 
     def __iter__(self) -> Iterator[Trial]:
         for _, row in self.trials.iterrows():
@@ -389,7 +460,8 @@ class Dataset:
         Each stream table gets the trials' group and label columns joined on.
         """
         return self.trials.copy(), {
-            s: table.merge(self.trials, on="trial_id", how="left") for s, table in self.tables.items()
+            s: table.merge(self.trials, on="trial_id", how="left")
+            for s, table in self.tables.items()
         }
 
     def subset(self, trial_ids: Iterable[str], *, name: str | None = None) -> Dataset:
@@ -413,7 +485,9 @@ class Dataset:
         """Declared class names of a class label."""
         spec = self.labels.get(label)
         if spec is None or spec.classes is None:
-            raise KeyError(f"{label!r} is not a class label of this dataset; labels: {sorted(self.labels)}")
+            raise KeyError(
+                f"{label!r} is not a class label of this dataset; labels: {sorted(self.labels)}"
+            )
         return spec.classes
 
     def fingerprint(self) -> str:
@@ -422,10 +496,21 @@ class Dataset:
         Bundles record it so a deployed model names the data it was trained on.
         """
         digest = hashlib.sha256()
-        digest.update(json.dumps(self._spec_json(), sort_keys=True, default=str).encode())
+        digest.update(
+            json.dumps(self._spec_json(), sort_keys=True, default=str).encode()
+        )
         for key, table in [("trials", self.trials), *sorted(self.tables.items())]:
             digest.update(key.encode())
-            digest.update(pd.util.hash_pandas_object(table.astype({c: str for c in table.columns if not _is_numeric(table[c])}), index=False).to_numpy().tobytes())
+            digest.update(
+                pd.util.hash_pandas_object(
+                    table.astype(
+                        {c: str for c in table.columns if not _is_numeric(table[c])}
+                    ),
+                    index=False,
+                )
+                .to_numpy()
+                .tobytes()
+            )
         return digest.hexdigest()
 
     def _spec_json(self) -> dict[str, Any]:
@@ -438,6 +523,7 @@ class Dataset:
 
     def __repr__(self) -> str:
         streams = ", ".join(
-            f"{s}[{len(spec.channels)}ch@{spec.rate_hz or spec.kind}]" for s, spec in self.streams.items()
+            f"{s}[{len(spec.channels)}ch@{spec.rate_hz or spec.kind}]"
+            for s, spec in self.streams.items()
         )
         return f"Dataset({self.name or '?'}: sensor={self.sensor}, trials={len(self)}, streams: {streams})"

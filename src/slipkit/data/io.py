@@ -47,7 +47,9 @@ def _write_parquet(df: pd.DataFrame, path: Path) -> None:
     df.to_parquet(path, index=False, compression="zstd", engine="pyarrow")
 
 
-def save_dataset(dataset: Dataset, path: Path | str, *, overwrite: bool = False) -> Path:
+def save_dataset(
+    dataset: Dataset, path: Path | str, *, overwrite: bool = False
+) -> Path:
     """Write ``dataset`` to the folder ``path`` atomically and return the path.
 
     Everything is written into a temporary sibling folder, checksummed, and
@@ -70,14 +72,18 @@ def save_dataset(dataset: Dataset, path: Path | str, *, overwrite: bool = False)
             "name": dataset.name,
             "sensor": dataset.sensor,
             "n_trials": len(dataset),
-            "streams": {s: spec.to_json() for s, spec in sorted(dataset.streams.items())},
+            "streams": {
+                s: spec.to_json() for s, spec in sorted(dataset.streams.items())
+            },
             "labels": {k: v.to_json() for k, v in sorted(dataset.labels.items())},
             "groups": list(dataset.groups),
             "provenance": _jsonable(dataset.provenance),
             "written_by": f"slipkit {__version__}",
             "files": files,
         }
-        (tmp / MANIFEST).write_text(json.dumps(manifest, indent=2, sort_keys=False) + "\n", encoding="utf-8")
+        (tmp / MANIFEST).write_text(
+            json.dumps(manifest, indent=2, sort_keys=False) + "\n", encoding="utf-8"
+        )
     return path
 
 
@@ -106,7 +112,9 @@ def read_manifest(path: Path | str) -> dict[str, Any]:
     path = Path(path)
     mpath = path / MANIFEST
     if not path.is_dir():
-        raise DatasetError(str(path), "not a folder; a dataset is a folder holding manifest.json")
+        raise DatasetError(
+            str(path), "not a folder; a dataset is a folder holding manifest.json"
+        )
     if not mpath.is_file():
         raise DatasetError(str(mpath), "missing; not a slipkit dataset folder")
     try:
@@ -116,13 +124,19 @@ def read_manifest(path: Path | str) -> dict[str, Any]:
     if not isinstance(manifest, dict):
         raise DatasetError(str(mpath), "expected a JSON object at the top level")
     if manifest.get("format") != FORMAT:
-        raise DatasetError(str(mpath), f"field 'format' is {manifest.get('format')!r}; expected {FORMAT!r}")
+        raise DatasetError(
+            str(mpath),
+            f"field 'format' is {manifest.get('format')!r}; expected {FORMAT!r}",
+        )
     for key, typ in _REQUIRED.items():
         if key not in manifest:
             raise DatasetError(str(mpath), f"missing field '{key}'")
-        if not isinstance(manifest[key], typ) or (typ is int and isinstance(manifest[key], bool)):
+        if not isinstance(manifest[key], typ) or (
+            typ is int and isinstance(manifest[key], bool)
+        ):
             raise DatasetError(
-                str(mpath), f"field '{key}' is {type(manifest[key]).__name__}; expected {getattr(typ, '__name__', typ)}"
+                str(mpath),
+                f"field '{key}' is {type(manifest[key]).__name__}; expected {getattr(typ, '__name__', typ)}",
             )
     version = manifest["schema_version"]
     if version > SCHEMA_VERSION:
@@ -131,7 +145,10 @@ def read_manifest(path: Path | str) -> dict[str, Any]:
             f"field 'schema_version' is {version}, newer than this slipkit reads ({SCHEMA_VERSION}); upgrade slipkit",
         )
     if version < 1:
-        raise DatasetError(str(mpath), f"field 'schema_version' is {version}; expected 1..{SCHEMA_VERSION}")
+        raise DatasetError(
+            str(mpath),
+            f"field 'schema_version' is {version}; expected 1..{SCHEMA_VERSION}",
+        )
     return manifest
 
 
@@ -139,7 +156,10 @@ def _read_parquet(path: Path, rel: str) -> pd.DataFrame:
     try:
         return pd.read_parquet(path / rel, engine="pyarrow")
     except Exception as exc:  # pyarrow raises several types for corrupt files
-        raise DatasetError(str(path / rel), f"could not be read as Parquet ({type(exc).__name__}: {exc})") from exc
+        raise DatasetError(
+            str(path / rel),
+            f"could not be read as Parquet ({type(exc).__name__}: {exc})",
+        ) from exc
 
 
 def load_dataset(path: Path | str, *, verify: bool = True) -> Dataset:
@@ -162,15 +182,25 @@ def load_dataset(path: Path | str, *, verify: bool = True) -> Dataset:
     manifest = read_manifest(path)
     mpath = str(path / MANIFEST)
     files: Mapping[str, str] = manifest["files"]
-    specs = {name: StreamSpec.from_json(name, entry, mpath) for name, entry in manifest["streams"].items()}
+    specs = {
+        name: StreamSpec.from_json(name, entry, mpath)
+        for name, entry in manifest["streams"].items()
+    }
     expected = {TRIALS, *(stream_file(s) for s in specs)}
     unlisted = sorted(expected - set(files))
     if unlisted:
         raise DatasetError(mpath, f"field 'files' does not list {unlisted}")
-    on_disk = {p.relative_to(path).as_posix() for p in (path / "streams").glob("*.parquet")} if (path / "streams").is_dir() else set()
+    on_disk = (
+        {p.relative_to(path).as_posix() for p in (path / "streams").glob("*.parquet")}
+        if (path / "streams").is_dir()
+        else set()
+    )
     stray = sorted(on_disk - set(files))
     if stray:
-        raise DatasetError(str(path / stray[0]), "is not listed in manifest.json 'files' (stray or renamed stream)")
+        raise DatasetError(
+            str(path / stray[0]),
+            "is not listed in manifest.json 'files' (stray or renamed stream)",
+        )
     for rel, digest in files.items():
         fpath = path / rel
         if not fpath.is_file():
@@ -179,7 +209,8 @@ def load_dataset(path: Path | str, *, verify: bool = True) -> Dataset:
             actual = sha256_file(fpath)
             if actual != digest:
                 raise DatasetError(
-                    str(fpath), f"sha256 mismatch: manifest says {digest[:12]}..., file has {actual[:12]}... (modified or truncated)"
+                    str(fpath),
+                    f"sha256 mismatch: manifest says {digest[:12]}..., file has {actual[:12]}... (modified or truncated)",
                 )
     trials = _read_parquet(path, TRIALS)
     tables = {s: _read_parquet(path, stream_file(s)) for s in specs}
@@ -193,5 +224,8 @@ def load_dataset(path: Path | str, *, verify: bool = True) -> Dataset:
         groups=manifest["groups"],
         provenance=manifest["provenance"],
         name=str(manifest.get("name", "")) or path.name,
-        sources={"trials": str(path / TRIALS), **{s: str(path / stream_file(s)) for s in specs}},
+        sources={
+            "trials": str(path / TRIALS),
+            **{s: str(path / stream_file(s)) for s in specs},
+        },
     )

@@ -89,18 +89,27 @@ def split_by_trial(
     _check_fraction("test_size", test_size)
     _check_fraction("val_size", val_size)
     ids = np.asarray(dataset.trial_ids, dtype=object)
-    strat = None if stratify is None else dataset.trials[stratify].astype(str).to_numpy()
+    strat = (
+        None if stratify is None else dataset.trials[stratify].astype(str).to_numpy()
+    )
     _check_enough(len(ids), "trials", test_size, val_size)
     pos = np.arange(len(ids))
     tr, te = pos, pos[:0]
     if test_size:
-        tr, te = train_test_split(pos, test_size=test_size, random_state=seed, stratify=strat)
+        tr, te = train_test_split(
+            pos, test_size=test_size, random_state=seed, stratify=strat
+        )
     va = tr[:0]
     if val_size:
         tr, va = train_test_split(
-            tr, test_size=val_size, random_state=seed + 1, stratify=None if strat is None else strat[tr]
+            tr,
+            test_size=val_size,
+            random_state=seed + 1,
+            stratify=None if strat is None else strat[tr],
         )
-    return TrialSplit(tuple(map(str, ids[tr])), tuple(map(str, ids[va])), tuple(map(str, ids[te])))
+    return TrialSplit(
+        tuple(map(str, ids[tr])), tuple(map(str, ids[va])), tuple(map(str, ids[te]))
+    )
 
 
 def split_by_group(
@@ -118,18 +127,34 @@ def split_by_group(
     _check_fraction("test_size", test_size)
     _check_fraction("val_size", val_size)
     if group not in dataset.trials.columns:
-        raise KeyError(f"no column {group!r} in the trials table; columns: {list(dataset.trials.columns)}")
+        raise KeyError(
+            f"no column {group!r} in the trials table; columns: {list(dataset.trials.columns)}"
+        )
     ids = np.asarray(dataset.trial_ids, dtype=object)
     groups = dataset.trials[group].astype(str).to_numpy()
     if len(set(groups)) < 2:
-        raise ValueError(f"cannot split by {group!r}: only one value ({groups[0]!r}) in the dataset")
+        raise ValueError(
+            f"cannot split by {group!r}: only one value ({groups[0]!r}) in the dataset"
+        )
     _check_enough(len(set(groups)), f"values of {group!r}", test_size, val_size)
-    tr, te = next(GroupShuffleSplit(n_splits=1, test_size=test_size, random_state=seed).split(ids, groups=groups))
+    tr, te = next(
+        GroupShuffleSplit(n_splits=1, test_size=test_size, random_state=seed).split(
+            ids, groups=groups
+        )
+    )
     val_idx = tr[:0]
     if val_size:
-        sub, v = next(GroupShuffleSplit(n_splits=1, test_size=val_size, random_state=seed + 1).split(tr, groups=groups[tr]))
+        sub, v = next(
+            GroupShuffleSplit(
+                n_splits=1, test_size=val_size, random_state=seed + 1
+            ).split(tr, groups=groups[tr])
+        )
         tr, val_idx = tr[sub], tr[v]
-    return TrialSplit(tuple(map(str, ids[tr])), tuple(map(str, ids[val_idx])), tuple(map(str, ids[te])))
+    return TrialSplit(
+        tuple(map(str, ids[tr])),
+        tuple(map(str, ids[val_idx])),
+        tuple(map(str, ids[te])),
+    )
 
 
 def time_blocks(dataset: Dataset, stream: str, block_s: float) -> np.ndarray:
@@ -140,7 +165,11 @@ def time_blocks(dataset: Dataset, stream: str, block_s: float) -> np.ndarray:
     tid = table["trial_id"].to_numpy()
     t = table["t"].to_numpy(dtype=np.float64)
     trial_code = np.unique(tid, return_inverse=True)[1]
-    t0 = table.groupby("trial_id", sort=False)["t"].transform("min").to_numpy(dtype=np.float64)
+    t0 = (
+        table.groupby("trial_id", sort=False)["t"]
+        .transform("min")
+        .to_numpy(dtype=np.float64)
+    )
     within = np.floor((t - t0) / block_s).astype(np.int64)
     pairs = np.stack([trial_code, within], axis=1)
     return np.unique(pairs, axis=0, return_inverse=True)[1].reshape(-1)
@@ -165,10 +194,20 @@ def split_time_blocks(
     blocks = time_blocks(dataset, stream, block_s)
     rows = np.arange(len(blocks))
     n_blocks = int(blocks.max()) + 1 if len(blocks) else 0
-    _check_enough(n_blocks, f"blocks of {block_s} s in stream {stream!r}", test_size, val_size)
-    tr, te = next(GroupShuffleSplit(n_splits=1, test_size=test_size, random_state=seed).split(rows, groups=blocks))
+    _check_enough(
+        n_blocks, f"blocks of {block_s} s in stream {stream!r}", test_size, val_size
+    )
+    tr, te = next(
+        GroupShuffleSplit(n_splits=1, test_size=test_size, random_state=seed).split(
+            rows, groups=blocks
+        )
+    )
     va = tr[:0]
     if val_size:
-        sub, v = next(GroupShuffleSplit(n_splits=1, test_size=val_size, random_state=seed + 1).split(tr, groups=blocks[tr]))
+        sub, v = next(
+            GroupShuffleSplit(
+                n_splits=1, test_size=val_size, random_state=seed + 1
+            ).split(tr, groups=blocks[tr])
+        )
         tr, va = tr[sub], tr[v]
     return BlockSplit(stream, blocks, np.sort(tr), np.sort(va), np.sort(te))

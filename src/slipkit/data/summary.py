@@ -16,7 +16,13 @@ def summary_dict(dataset: Dataset) -> dict[str, Any]:
     streams: dict[str, Any] = {}
     for name, spec in dataset.streams.items():
         table = dataset.tables[name]
-        span = table.groupby("trial_id", sort=False)["t"].agg(lambda t: float(t.iloc[-1] - t.iloc[0])) if len(table) else pd.Series(dtype=float)
+        span = (
+            table.groupby("trial_id", sort=False)["t"].agg(
+                lambda t: float(t.iloc[-1] - t.iloc[0])
+            )
+            if len(table)
+            else pd.Series(dtype=float)
+        )
         streams[name] = {
             "kind": spec.kind,
             "rate_hz": spec.rate_hz,
@@ -25,7 +31,9 @@ def summary_dict(dataset: Dataset) -> dict[str, Any]:
             "units": sorted(set(spec.units.values())),
             "rows": len(table),
             "trials_with_stream": int(table["trial_id"].nunique()) if len(table) else 0,
-            "duration_s": None if spec.kind == "snapshot" or span.empty else {
+            "duration_s": None
+            if spec.kind == "snapshot" or span.empty
+            else {
                 "min": round(float(span.min()), 4),
                 "mean": round(float(span.mean()), 4),
                 "max": round(float(span.max()), 4),
@@ -45,7 +53,11 @@ def summary_dict(dataset: Dataset) -> dict[str, Any]:
                 "unit": lab.unit,
                 "known": int(finite.size),
                 "missing": int(values.size - finite.size),
-                **({"min": float(finite.min()), "max": float(finite.max())} if finite.size else {}),
+                **(
+                    {"min": float(finite.min()), "max": float(finite.max())}
+                    if finite.size
+                    else {}
+                ),
             }
     groups = {g: int(dataset.trials[g].nunique()) for g in dataset.groups}
     return {
@@ -77,7 +89,11 @@ def summarize(dataset: Dataset) -> str:
     for name, s in info["streams"].items():
         rate = f"{s['rate_hz']:g} Hz" if s["rate_hz"] else s["kind"]
         dur = s["duration_s"]
-        dur_txt = "" if dur is None else f", {dur['min']:g}-{dur['max']:g} s per trial ({dur['total']:g} s in all)"
+        dur_txt = (
+            ""
+            if dur is None
+            else f", {dur['min']:g}-{dur['max']:g} s per trial ({dur['total']:g} s in all)"
+        )
         lines.append(
             f"  {name:<14} {rate:>10}  {s['channels']:>3} ch [{s['channel_names']}] "
             f"in {'/'.join(s['units'])}, {s['rows']} rows{dur_txt}"
@@ -87,11 +103,21 @@ def summarize(dataset: Dataset) -> str:
         for name, lab in info["labels"].items():
             if "known" in lab:
                 rng = f", {lab['min']:g}..{lab['max']:g}" if "min" in lab else ""
-                lines.append(f"  {name:<18} {lab['known']} known, {lab['missing']} missing ({lab['unit']}){rng}")
+                lines.append(
+                    f"  {name:<18} {lab['known']} known, {lab['missing']} missing ({lab['unit']}){rng}"
+                )
             else:
-                lines.append(f"  {name:<18} " + ", ".join(f"{c}: {n}" for c, n in lab.items()))
+                lines.append(
+                    f"  {name:<18} " + ", ".join(f"{c}: {n}" for c, n in lab.items())
+                )
     if info["groups"]:
-        lines.append("groups    " + ", ".join(f"{g} ({n} values)" for g, n in info["groups"].items()))
+        lines.append(
+            "groups    "
+            + ", ".join(f"{g} ({n} values)" for g, n in info["groups"].items())
+        )
     if info["provenance"]:
-        lines.append("provenance " + json.dumps(info["provenance"], sort_keys=True, default=str)[:400])
+        lines.append(
+            "provenance "
+            + json.dumps(info["provenance"], sort_keys=True, default=str)[:400]
+        )
     return "\n".join(lines)

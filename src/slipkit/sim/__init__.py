@@ -3,6 +3,7 @@
 See ``docs/simulation.md`` for every effect's equation and source.
 """
 
+from slipkit.sim import effects as _effects  # noqa: F401  (registers every effect)
 from slipkit.sim.core import (
     EFFECTS,
     Scene,
@@ -13,7 +14,6 @@ from slipkit.sim.core import (
     register_effect,
     sample_times,
 )
-from slipkit.sim import effects as _effects  # noqa: F401  (registers every effect)
 
 __all__ = [
     "EFFECTS",

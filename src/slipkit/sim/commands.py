@@ -16,14 +16,18 @@ from slipkit.sim.core import Scene
 def build_scene(scene_cfg: DictConfig) -> Scene:
     """A :class:`Scene` from a ``configs/scene/*.yaml`` node (model via ``instantiate``)."""
     effects: Any = OmegaConf.to_container(scene_cfg.get("effects") or {}, resolve=True)
-    return Scene(name=str(scene_cfg.name), model=instantiate(scene_cfg.model), effects=effects)
+    return Scene(
+        name=str(scene_cfg.name), model=instantiate(scene_cfg.model), effects=effects
+    )
 
 
 def simulate_main(cfg: DictConfig) -> Path:
     """Simulate ``cfg.n_trials`` trials of ``cfg.scene`` and write the dataset to ``cfg.out``."""
     scene = build_scene(cfg.scene)
     config = OmegaConf.to_container(cfg.scene, resolve=True)
-    dataset = scene.simulate(int(cfg.n_trials), int(cfg.seed), progress=bool(cfg.progress), config=config)
+    dataset = scene.simulate(
+        int(cfg.n_trials), int(cfg.seed), progress=bool(cfg.progress), config=config
+    )
     out = save_dataset(dataset, Path(str(cfg.out)), overwrite=bool(cfg.overwrite))
     if cfg.summary:
         print(summarize(dataset))

@@ -80,7 +80,9 @@ def register_effect(name: str) -> Callable[[Effect], Effect]:
 
     def deco(fn: Effect) -> Effect:
         if name in EFFECTS and EFFECTS[name] is not fn:
-            raise ValueError(f"effect {name!r} is already registered by {EFFECTS[name].__module__}")
+            raise ValueError(
+                f"effect {name!r} is already registered by {EFFECTS[name].__module__}"
+            )
         EFFECTS[name] = fn
         return fn
 
@@ -105,7 +107,9 @@ class SceneModel(Protocol):
     def base(self, params: Mapping[str, Any], rng: np.random.Generator) -> SceneState:
         """Build the trial's noiseless backbone from its parameters."""
 
-    def render(self, state: SceneState) -> tuple[dict[str, pd.DataFrame], dict[str, Any], dict[str, Any]]:
+    def render(
+        self, state: SceneState
+    ) -> tuple[dict[str, pd.DataFrame], dict[str, Any], dict[str, Any]]:
         """Turn the final state into (streams, labels, meta) of a :class:`Trial`."""
 
 
@@ -149,9 +153,21 @@ class Scene:
         for name, kwargs in self.effects.items():
             state = EFFECTS[name](state, rng, **dict(kwargs or {}))
         streams, labels, meta = self.model.render(state)
-        return Trial(trial_id=f"{self.name}-{index:05d}", streams=streams, labels=labels, meta=meta)
+        return Trial(
+            trial_id=f"{self.name}-{index:05d}",
+            streams=streams,
+            labels=labels,
+            meta=meta,
+        )
 
-    def simulate(self, n_trials: int, seed: int = 0, *, progress: bool = False, config: Any = None) -> Dataset:
+    def simulate(
+        self,
+        n_trials: int,
+        seed: int = 0,
+        *,
+        progress: bool = False,
+        config: Any = None,
+    ) -> Dataset:
         """Simulate ``n_trials`` trials into a :class:`Dataset` (provenance: scene, seed, config)."""
         if n_trials < 1:
             raise SimulationError(f"n_trials must be >= 1; got {n_trials}")
@@ -159,10 +175,16 @@ class Scene:
         if progress:
             from tqdm import tqdm
 
-            indices = tqdm(indices, desc=f"simulate {self.name}", unit="trial", leave=False)
+            indices = tqdm(
+                indices, desc=f"simulate {self.name}", unit="trial", leave=False
+            )
         trials = [self.run_trial(i, seed) for i in indices]
-        provenance: dict[str, Any] = {"scene": self.name, "seed": int(seed), "n_trials": int(n_trials),
-                                      "effects": list(self.effects)}
+        provenance: dict[str, Any] = {
+            "scene": self.name,
+            "seed": int(seed),
+            "n_trials": int(n_trials),
+            "effects": list(self.effects),
+        }
         if config is not None:
             provenance["config"] = config
         return Dataset.from_trials(
@@ -196,4 +218,6 @@ def sample_times(duration_s: float, rate_hz: float) -> np.ndarray:
     """Regular sample times ``k / rate`` (s) covering ``[0, duration)``."""
     if rate_hz <= 0:
         raise SimulationError(f"rate_hz must be > 0; got {rate_hz}")
-    return np.arange(int(round(duration_s * rate_hz)), dtype=np.float64) / float(rate_hz)
+    return np.arange(round(duration_s * rate_hz), dtype=np.float64) / float(
+        rate_hz
+    )
