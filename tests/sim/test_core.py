@@ -158,3 +158,13 @@ def test_phase_and_sample_times() -> None:
     np.testing.assert_allclose([0.0, 0.25, 0.5, 0.75], sample_times(1.0, 4.0))
     with pytest.raises(SimulationError, match="negative duration"):
         phase_times({"a": -1.0})
+
+
+def test_an_effect_can_run_twice_under_suffixed_keys() -> None:
+    """`white_noise@a` and `white_noise@b` both run: noise adds in quadrature."""
+    effects = {
+        "white_noise@first": {"target": "sig", "sigma": 0.3},
+        "white_noise@second": {"target": "sig", "sigma": 0.4},
+    }
+    table = Scene("ramp", Ramp(), effects).simulate(4, seed=0).stream("sig")
+    assert pytest.approx(0.5, rel=0.15) == float(np.std(table["v"] - table["t"]))

@@ -113,6 +113,11 @@ class SceneModel(Protocol):
         """Turn the final state into (streams, labels, meta) of a :class:`Trial`."""
 
 
+def effect_name(key: str) -> str:
+    """The registered effect behind a scene's effect key (``white_noise@pac`` -> ``white_noise``)."""
+    return key.split("@", 1)[0]
+
+
 def _load_effect_modules() -> None:
     # Importing registers the effects; kept here so `EFFECTS` is complete before a run.
     from slipkit.sim import effects  # noqa: F401
@@ -130,7 +135,8 @@ class Scene:
         Built by ``hydra.utils.instantiate`` from ``configs/scene/<name>.yaml``.
     effects : mapping of str to mapping
         Effect name -> keyword parameters, evaluated in this order. ``null`` parameters
-        mean "no parameters". An effect absent here is never called.
+        mean "no parameters". An effect absent here is never called. To apply one
+        effect twice (e.g. noise on two streams), suffix the key: ``white_noise@pac``.
     """
 
     name: str
@@ -139,7 +145,7 @@ class Scene:
 
     def __post_init__(self) -> None:
         _load_effect_modules()
-        unknown = [e for e in self.effects if e not in EFFECTS]
+        unknown = [e for e in self.effects if effect_name(e) not in EFFECTS]
         if unknown:
             raise SimulationError(
                 f"scene {self.name!r}: unknown effects {unknown} (scene.effects); known: {sorted(EFFECTS)}"
@@ -151,7 +157,7 @@ class Scene:
         params = self.model.sample(rng)
         state = self.model.base(params, rng)
         for name, kwargs in self.effects.items():
-            state = EFFECTS[name](state, rng, **dict(kwargs or {}))
+            state = EFFECTS[effect_name(name)](state, rng, **dict(kwargs or {}))
         streams, labels, meta = self.model.render(state)
         return Trial(
             trial_id=f"{self.name}-{index:05d}",
