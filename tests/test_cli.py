@@ -76,3 +76,42 @@ def test_console_script_runs_in_a_subprocess(tmp_path: Path) -> None:
     )
     assert 0 == result.returncode, result.stderr
     assert "sensor    biotac" in result.stdout
+
+
+def test_simulate_with_every_effect_removed(tmp_path: Path) -> None:
+    """A scene with its effects removed on the command line still simulates (backbone only)."""
+    out = tmp_path / "pull"
+    main(
+        [
+            "simulate",
+            "scene=sliptack_pull",
+            "n_trials=1",
+            "~scene.effects",
+            f"out={out}",
+            "progress=false",
+            "summary=false",
+        ]
+    )
+    from slipkit.data import load_dataset
+
+    assert [] == load_dataset(out).provenance["effects"]
+
+
+def test_out_of_range_scene_parameter_is_a_clear_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A model parameter out of range exits 2 with the key named and no traceback."""
+    with pytest.raises(SystemExit) as exc:
+        main(
+            [
+                "simulate",
+                "scene=sliptack_pull",
+                "scene.model.rate_hz=-5",
+                f"out={tmp_path / 'x'}",
+            ]
+        )
+    assert 2 == exc.value.code
+    err = capsys.readouterr().err
+    assert "rate_hz" in err
+    assert "Traceback" not in err
+    assert not (tmp_path / "x").exists()

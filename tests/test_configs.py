@@ -57,11 +57,25 @@ def test_wheel_ships_the_config_tree(tmp_path: Path) -> None:
 
     root = Path(__file__).resolve().parents[1]
     subprocess.run(
-        [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(tmp_path), str(root)],
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "--no-deps",
+            "--no-build-isolation",
+            "-q",
+            "-w",
+            str(tmp_path),
+            str(root),
+        ],
         check=True,
         capture_output=True,
     )
     (wheel,) = tmp_path.glob("slipkit-*.whl")
     names = set(zipfile.ZipFile(wheel).namelist())
-    expected = {f"slipkit/configs/{p.relative_to(CONFIGS).as_posix()}" for p in CONFIGS.rglob("*.yaml")}
+    expected = {
+        f"slipkit/configs/{p.relative_to(CONFIGS).as_posix()}"
+        for p in CONFIGS.rglob("*.yaml")
+    }
     assert expected <= names

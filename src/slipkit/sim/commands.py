@@ -5,20 +5,34 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from hydra.errors import InstantiationException
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from slipkit.data.io import save_dataset
 from slipkit.data.summary import summarize
+from slipkit.errors import SlipkitError
 from slipkit.sim.core import Scene
 
 
 def build_scene(scene_cfg: DictConfig) -> Scene:
-    """A :class:`Scene` from a ``configs/scene/*.yaml`` node (model via ``instantiate``)."""
-    effects: Any = OmegaConf.to_container(scene_cfg.get("effects") or {}, resolve=True)
-    return Scene(
-        name=str(scene_cfg.name), model=instantiate(scene_cfg.model), effects=effects
-    )
+    """A :class:`Scene` from a ``configs/scene/*.yaml`` node (model via ``instantiate``).
+
+    A model that refuses its parameters raises a :class:`SlipkitError` naming the key;
+    Hydra wraps it in ``InstantiationException``, which is unwrapped here so the CLI
+    prints the message instead of a traceback.
+    """
+    node = scene_cfg.get("effects")
+    effects: Any = {}
+    if node is not None and len(node):
+        effects = OmegaConf.to_container(node, resolve=True)
+    try:
+        model = instantiate(scene_cfg.model)
+    except InstantiationException as exc:
+        if isinstance(exc.__cause__, SlipkitError):
+            raise exc.__cause__ from None
+        raise
+    return Scene(name=str(scene_cfg.name), model=model, effects=effects)
 
 
 def simulate_main(cfg: DictConfig) -> Path:

@@ -224,6 +224,4 @@ def sample_times(duration_s: float, rate_hz: float) -> np.ndarray:
     """Regular sample times ``k / rate`` (s) covering ``[0, duration)``."""
     if rate_hz <= 0:
         raise SimulationError(f"rate_hz must be > 0; got {rate_hz}")
-    return np.arange(round(duration_s * rate_hz), dtype=np.float64) / float(
-        rate_hz
-    )
+    return np.arange(round(duration_s * rate_hz), dtype=np.float64) / float(rate_hz)

@@ -1,0 +1,230 @@
+"""FSR effects: the touch (press), stick-slip vibration events and impulsive disturbances.
+
+Each acts on the physical normal force ``signals["force"]`` (N, aligned with the
+``truth`` stream) and carries the change to the conditioned voltage ``signals["fsr"]``
+through the inverse of the calibration eq. 6 (the difference ``V(F_new) - V(F_old)`` is
+added, so voltage-domain effects listed earlier are kept). List them before the
+voltage-domain effects (noise, quantisation). Source: Gentile et al. 2020; the scene is
+:class:`slipkit.sim.scenes.fsr.FSRProbeSlide`; documentation: ``docs/simulation/fsr.md``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from slipkit.physics.fsr import (
+    SLIP_COUNT_COEFF,
+    SLIP_COUNT_FORCE_EXPONENT,
+    SLIP_COUNT_PASS_EXPONENT,
+    expected_slip_events,
+    voltage_from_force,
+)
+from slipkit.sim.core import SceneState, SimulationError, register_effect
+
+
+def _truth(state: SceneState, key: str, effect: str) -> Any:
+    if key not in state.truth:
+        raise SimulationError(
+            f"effect {effect!r} needs truth[{key!r}], which this scene lacks"
+        )
+    return state.truth[key]
+
+
+def _span(value: Any, key: str, effect: str, lo: float = 0.0) -> tuple[float, float]:
+    """A number or ``[low, high]`` parameter, checked to be finite and >= ``lo``."""
+    items = (
+        list(value)
+        if isinstance(value, Sequence) and not isinstance(value, str)
+        else [value]
+    )
+    items = items * 2 if len(items) == 1 else items
+    try:
+        a, b = (float(v) for v in items)
+    except (TypeError, ValueError):
+        raise SimulationError(
+            f"effect {effect!r}: {key} must be a number or [low, high]"
+        ) from None
+    if len(items) != 2 or not (np.isfinite(a) and np.isfinite(b)) or a < lo or b < a:
+        raise SimulationError(
+            f"effect {effect!r}: {key} must be a number or [low, high] with {lo} <= low <= high; "
+            f"got {value!r}"
+        )
+    return a, b
+
+
+def _uniform(
+    rng: np.random.Generator, span: tuple[float, float], size: int
+) -> np.ndarray:
+    return (
+        rng.uniform(span[0], span[1], size=size)
+        if span[1] > span[0]
+        else np.full(size, span[0])
+    )
+
+
+def _with_force(state: SceneState, force: np.ndarray, effect: str) -> SceneState:
+    """Replace the force and carry the change to the voltage through eq. 6's inverse."""
+    old = state.signal("force", effect)
+    volts = state.signal("fsr", effect)
+    coeffs = _truth(state, "calibration", effect)
+    out_range = _truth(state, "output_range_V", effect)
+    changed = np.flatnonzero(force != old)
+    delta = np.zeros_like(old)
+    if len(changed):
+        delta[changed] = voltage_from_force(
+            force[changed], coeffs, out_range
+        ) - voltage_from_force(old[changed], coeffs, out_range)
+    t_fsr, t_truth = state.time["fsr"], state.time["truth"]
+    if t_fsr is not t_truth and not np.array_equal(t_fsr, t_truth):
+        delta = np.interp(t_fsr, t_truth, delta)  # the fsr stream lost or moved frames
+    return state.with_signal("force", force).with_signal("fsr", volts + delta)
+
+
+@register_effect("fsr_touch")
+def fsr_touch(
+    state: SceneState, rng: np.random.Generator, *, rise_s: float = 0.01
+) -> SceneState:
+    """The touch: the probe presses the FSR at ``truth["touch_s"]``.
+
+    The force is zero before the touch and rises to the pressed force over ``rise_s``
+    (raised cosine), so the voltage steps down from rest (the paper's stage 1, eqs. 2-3:
+    ``v_rest - v_mean > delta``; Fig. 3, instant t0). Without this effect the probe is
+    pressed from the first sample and there is no step.
+    """
+    del rng
+    name = "fsr_touch"
+    rise = float(rise_s)
+    if not np.isfinite(rise) or rise < 0:
+        raise SimulationError(f"effect {name!r}: rise_s must be >= 0; got {rise_s!r}")
+    t = state.time["truth"]
+    t0 = float(_truth(state, "touch_s", name))
+    frac = (
+        np.clip((t - t0) / rise, 0.0, 1.0) if rise > 0 else (t >= t0).astype(np.float64)
+    )
+    profile = 0.5 * (1.0 - np.cos(np.pi * frac))
+    return _with_force(state, state.signal("force", name) * profile, name)
+
+
+@register_effect("fsr_slip_events")
+def fsr_slip_events(
+    state: SceneState,
+    rng: np.random.Generator,
+    *,
+    coeff: float = SLIP_COUNT_COEFF,
+    force_exponent: float = SLIP_COUNT_FORCE_EXPONENT,
+    pass_exponent: float = SLIP_COUNT_PASS_EXPONENT,
+    amplitude_frac: Any = (0.08, 0.16),
+    decay_s: float = 0.003,
+    ring_hz: float = 150.0,
+    jitter: float = 0.3,
+) -> SceneState:
+    """Stick-slip vibration events while the probe slides over the sensor.
+
+    Count per pass ``n ~ Poisson(c F^alpha T^beta)``, the law fitted to Table 3 of the
+    paper (more events at higher normal force ``F``, fewer per pass for a shorter pass
+    ``T``, a higher rate per second; :func:`slipkit.physics.fsr.expected_slip_events`).
+    Event times: evenly spaced over the pass, each moved by up to ``jitter`` of the
+    spacing (stick-slip is quasi-periodic). Each event releases the normal force abruptly
+    and rings: ``dF(t) = -A exp(-t / decay_s) cos(2 pi ring_hz t)``, ``A`` a fraction
+    ``amplitude_frac`` of the pressed force (assumption: the paper shows the events as
+    sharp positive voltage-derivative spikes, Figs. 14-16, that exceed ``alpha = 8``).
+    Marks ``slip_event = 1`` for ``3 decay_s`` after each onset (the ring-down to 5%;
+    events closer than that merge in the indicator) and sets ``truth["n_slip_events"]``.
+    """
+    name = "fsr_slip_events"
+    amp = _span(amplitude_frac, "amplitude_frac", name)
+    decay = _span(decay_s, "decay_s", name)[0]
+    ring = _span(ring_hz, "ring_hz", name)[0]
+    jit = _span(jitter, "jitter", name)[0]
+    if decay <= 0 or jit >= 0.5:
+        raise SimulationError(
+            f"effect {name!r}: need decay_s > 0 and 0 <= jitter < 0.5"
+        )
+    t = state.time["truth"]
+    force = state.signal("force", name)
+    s0, s1 = map(float, _truth(state, "phases", name)["slide"])
+    fn = float(_truth(state, "normal_force_N", name))
+    mean = float(
+        expected_slip_events(fn, s1 - s0, coeff, force_exponent, pass_exponent)
+    )
+    n = int(rng.poisson(mean))
+    if n == 0 or len(t) < 2:
+        return state.with_truth(n_slip_events=0)
+    k = np.arange(n)
+    onsets = s0 + (s1 - s0) * (k + 0.5 + jit * rng.uniform(-1.0, 1.0, size=n)) / n
+    amps = fn * _uniform(rng, amp, n)
+    rate = 1.0 / float(t[1] - t[0])
+    idx = np.clip(np.searchsorted(t, onsets), 0, len(t) - 1)
+    impulses = np.zeros(len(t))
+    np.add.at(impulses, idx, amps)
+    tau = np.arange(int(np.ceil(6.0 * decay * rate)) + 1) / rate
+    kernel = -np.exp(-tau / decay) * np.cos(2.0 * np.pi * ring * tau)
+    dforce = np.convolve(impulses, kernel)[: len(t)]
+    width = max(1, round(3.0 * decay * rate))
+    marks = np.zeros(len(t) + 1)
+    np.add.at(marks, idx, 1.0)
+    np.add.at(marks, np.minimum(idx + width, len(t)), -1.0)
+    indicator = (np.cumsum(marks[:-1]) > 0).astype(np.float64)
+    indicator = np.maximum(state.signal("slip_event", name), indicator)
+    out = _with_force(state, force + dforce, name)
+    return out.with_signal("slip_event", indicator).with_truth(n_slip_events=n)
+
+
+@register_effect("fsr_disturbance")
+def fsr_disturbance(
+    state: SceneState,
+    rng: np.random.Generator,
+    *,
+    count: Any = (1, 3),
+    amplitude_frac: Any = (0.02, 0.06),
+    duration_s: Any = (0.06, 0.15),
+    margin_s: float = 0.05,
+) -> SceneState:
+    """Impulsive external disturbances that cause no slip, during the hold.
+
+    The paper's 50 impulsive disturbances (Sec. 3.3, Fig. 19) changed the force without
+    moving the object and stayed below the slip threshold. Each is a single smooth bump
+    ``dF = s A (1 - cos(2 pi t / D)) / 2`` of random sign ``s`` (both signs), amplitude
+    ``A`` a fraction ``amplitude_frac`` of the pressed force and duration ``D``
+    (``duration_s``): its slope, at most ``pi A / D``, is far below a slip event's
+    abrupt drop. ``count`` bumps (an integer range) are placed in the hold phase, at
+    least ``margin_s`` from its ends; ``disturbance = 1`` marks them.
+    """
+    name = "fsr_disturbance"
+    c_lo, c_hi = _span(count, "count", name)
+    if c_lo != int(c_lo) or c_hi != int(c_hi):
+        raise SimulationError(
+            f"effect {name!r}: count must be whole numbers; got {count!r}"
+        )
+    amp = _span(amplitude_frac, "amplitude_frac", name)
+    dur = _span(duration_s, "duration_s", name)
+    margin = _span(margin_s, "margin_s", name)[0]
+    if dur[0] <= 0:
+        raise SimulationError(f"effect {name!r}: duration_s must be > 0")
+    h0, h1 = map(float, _truth(state, "phases", name)["hold"])
+    lo, hi = h0 + margin, h1 - margin
+    n = int(rng.integers(int(c_lo), int(c_hi) + 1))
+    if n == 0:
+        return state
+    if hi - lo < dur[1]:
+        raise SimulationError(
+            f"effect {name!r}: the hold phase ({h1 - h0:.3g} s) cannot fit a {dur[1]} s bump "
+            f"with margin_s={margin}; lengthen model.hold_s or shorten duration_s"
+        )
+    t = state.time["truth"]
+    fn = float(_truth(state, "normal_force_N", name))
+    durations = _uniform(rng, dur, n)
+    starts = lo + rng.uniform(0.0, 1.0, size=n) * (hi - lo - durations)
+    signs = rng.choice(np.array([-1.0, 1.0]), size=n)
+    amps = signs * fn * _uniform(rng, amp, n)
+    force = state.signal("force", name).copy()
+    marks = state.signal("disturbance", name).copy()
+    for start, length, a in zip(starts, durations, amps, strict=True):  # a few bumps
+        i0, i1 = np.searchsorted(t, [start, start + length])
+        phase = (t[i0:i1] - start) / length
+        force[i0:i1] += a * 0.5 * (1.0 - np.cos(2.0 * np.pi * phase))
+        marks[i0:i1] = 1.0
+    return _with_force(state, force, name).with_signal("disturbance", marks)
