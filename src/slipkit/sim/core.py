@@ -61,6 +61,15 @@ class SceneState:
         """A new state with ground-truth entries added or replaced."""
         return dataclasses.replace(self, truth={**self.truth, **values})
 
+    def truth_value(self, key: str, effect: str) -> Any:
+        """``truth[key]``, or a :class:`SimulationError` naming the effect that needs it."""
+        if key not in self.truth:
+            raise SimulationError(
+                f"effect {effect!r} needs ground truth {key!r}, which this scene does not "
+                f"provide; truth: {sorted(self.truth)}"
+            )
+        return self.truth[key]
+
     def signal(self, name: str, effect: str) -> np.ndarray:
         """``signals[name]``, or a :class:`SimulationError` naming the effect that needs it."""
         if name not in self.signals:

@@ -12,7 +12,6 @@ deformation on the silicon skin" (Sec. V-A), and these effects are that non-line
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
 
 import numpy as np
 from scipy import signal as sps
@@ -26,15 +25,6 @@ from slipkit.physics.biotac import (
 from slipkit.sim.core import SceneState, SimulationError, register_effect
 
 
-def _truth(state: SceneState, key: str, effect: str) -> Any:
-    if key not in state.truth:
-        raise SimulationError(
-            f"effect {effect!r} needs ground truth {key!r}, which this scene does not "
-            f"provide; truth: {sorted(state.truth)}"
-        )
-    return state.truth[key]
-
-
 def _electrode_delta(
     state: SceneState, target: str, effect: str
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -45,7 +35,7 @@ def _electrode_delta(
             f"effect {effect!r}: signal {target!r} has shape {x.shape}; "
             f"expected (n, {N_ELECTRODES}) electrode counts"
         )
-    base = np.asarray(_truth(state, "electrode_baseline", effect), dtype=np.float64)
+    base = np.asarray(state.truth_value("electrode_baseline", effect), dtype=np.float64)
     return x, base
 
 
@@ -61,8 +51,8 @@ def _press_values(
     """``truth[key]`` (one 3-vector per press) and the index of the press in force at
     each time ``t``: presses start at ``truth["contact_start_s"]``, the last one
     started applies."""
-    starts = np.asarray(_truth(state, "contact_start_s", effect), dtype=np.float64)
-    values = np.asarray(_truth(state, key, effect), dtype=np.float64).reshape(-1, 3)
+    starts = np.asarray(state.truth_value("contact_start_s", effect), dtype=np.float64)
+    values = np.asarray(state.truth_value(key, effect), dtype=np.float64).reshape(-1, 3)
     if len(values) != len(starts):
         raise SimulationError(
             f"effect {effect!r}: truth {key!r} has {len(values)} rows for "
@@ -194,15 +184,15 @@ def slip_deformation(
     del rng  # deterministic
     _positive("slip_deformation", tau_s=tau_s, width_mm=width_mm)
     x, _ = _electrode_delta(state, target, "slip_deformation")
-    onset = float(_truth(state, "slip_onset_s", "slip_deformation"))
+    onset = float(state.truth_value("slip_onset_s", "slip_deformation"))
     if not np.isfinite(onset):
         return state
-    cls = str(_truth(state, "slip_class", "slip_deformation"))
+    cls = str(state.truth_value("slip_class", "slip_deformation"))
     at = np.array([onset])
     points, i = _press_values(state, at, "slip_deformation", "contact_point_mm")
     normals, _ = _press_values(state, at, "slip_deformation", "contact_normal")
     c, n = points[i[0]], normals[i[0]]
-    d = np.asarray(_truth(state, "load_direction", "slip_deformation"), dtype=float)
+    d = np.asarray(state.truth_value("load_direction", "slip_deformation"), dtype=float)
     r = ELECTRODE_POSITIONS_MM - c
     if cls == "linear":
         along = np.full(N_ELECTRODES, float(drag_mm))
@@ -215,8 +205,8 @@ def slip_deformation(
     t = state.time[target]
     grip = np.interp(
         t,
-        np.asarray(_truth(state, "grip_t_s", "slip_deformation"), float),
-        np.asarray(_truth(state, "grip_fraction", "slip_deformation"), float),
+        np.asarray(state.truth_value("grip_t_s", "slip_deformation"), float),
+        np.asarray(state.truth_value("grip_fraction", "slip_deformation"), float),
     )
     a = np.where(t >= onset, -np.expm1(-np.maximum(t - onset, 0.0) / tau_s), 0.0)
     pattern = gain_counts_per_mm * proximity_weights(c, width_mm) * along
@@ -319,10 +309,10 @@ def slip_vibration(
             f"got {rms_counts}, {ramp_s}"
         )
     x = state.signal(target, "slip_vibration")
-    onset = float(_truth(state, "slip_onset_s", "slip_vibration"))
+    onset = float(state.truth_value("slip_onset_s", "slip_vibration"))
     if not np.isfinite(onset):
         return state
-    end = float(_truth(state, "slip_end_s", "slip_vibration"))
+    end = float(state.truth_value("slip_end_s", "slip_vibration"))
     texture = float(state.truth.get("texture", 1.0))
     t = state.time[target]
     ramp = max(float(ramp_s), 1e-9)

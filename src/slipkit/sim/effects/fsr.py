@@ -25,14 +25,6 @@ from slipkit.physics.fsr import (
 from slipkit.sim.core import SceneState, SimulationError, register_effect
 
 
-def _truth(state: SceneState, key: str, effect: str) -> Any:
-    if key not in state.truth:
-        raise SimulationError(
-            f"effect {effect!r} needs truth[{key!r}], which this scene lacks"
-        )
-    return state.truth[key]
-
-
 def _span(value: Any, key: str, effect: str, lo: float = 0.0) -> tuple[float, float]:
     """A number or ``[low, high]`` parameter, checked to be finite and >= ``lo``."""
     items = (
@@ -69,8 +61,8 @@ def _with_force(state: SceneState, force: np.ndarray, effect: str) -> SceneState
     """Replace the force and carry the change to the voltage through eq. 6's inverse."""
     old = state.signal("force", effect)
     volts = state.signal("fsr", effect)
-    coeffs = _truth(state, "calibration", effect)
-    out_range = _truth(state, "output_range_V", effect)
+    coeffs = state.truth_value("calibration", effect)
+    out_range = state.truth_value("output_range_V", effect)
     changed = np.flatnonzero(force != old)
     delta = np.zeros_like(old)
     if len(changed):
@@ -100,7 +92,7 @@ def fsr_touch(
     if not np.isfinite(rise) or rise < 0:
         raise SimulationError(f"effect {name!r}: rise_s must be >= 0; got {rise_s!r}")
     t = state.time["truth"]
-    t0 = float(_truth(state, "touch_s", name))
+    t0 = float(state.truth_value("touch_s", name))
     frac = (
         np.clip((t - t0) / rise, 0.0, 1.0) if rise > 0 else (t >= t0).astype(np.float64)
     )
@@ -145,8 +137,8 @@ def fsr_slip_events(
         )
     t = state.time["truth"]
     force = state.signal("force", name)
-    s0, s1 = map(float, _truth(state, "phases", name)["slide"])
-    fn = float(_truth(state, "normal_force_N", name))
+    s0, s1 = map(float, state.truth_value("phases", name)["slide"])
+    fn = float(state.truth_value("normal_force_N", name))
     mean = float(
         expected_slip_events(fn, s1 - s0, coeff, force_exponent, pass_exponent)
     )
@@ -204,7 +196,7 @@ def fsr_disturbance(
     margin = _span(margin_s, "margin_s", name)[0]
     if dur[0] <= 0:
         raise SimulationError(f"effect {name!r}: duration_s must be > 0")
-    h0, h1 = map(float, _truth(state, "phases", name)["hold"])
+    h0, h1 = map(float, state.truth_value("phases", name)["hold"])
     lo, hi = h0 + margin, h1 - margin
     n = int(rng.integers(int(c_lo), int(c_hi) + 1))
     if n == 0:
@@ -215,7 +207,7 @@ def fsr_disturbance(
             f"with margin_s={margin}; lengthen model.hold_s or shorten duration_s"
         )
     t = state.time["truth"]
-    fn = float(_truth(state, "normal_force_N", name))
+    fn = float(state.truth_value("normal_force_N", name))
     durations = _uniform(rng, dur, n)
     starts = lo + rng.uniform(0.0, 1.0, size=n) * (hi - lo - durations)
     signs = rng.choice(np.array([-1.0, 1.0]), size=n)

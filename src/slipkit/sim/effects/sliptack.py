@@ -7,8 +7,6 @@ Physics: :mod:`slipkit.physics.stick_slip`; documentation: ``docs/simulation/sli
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
 from slipkit.physics.stick_slip import (
@@ -26,14 +24,6 @@ def _positive(value: float, key: str, effect: str) -> float:
     if not np.isfinite(value) or value <= 0:
         raise SimulationError(f"effect {effect!r}: {key} must be > 0; got {value}")
     return value
-
-
-def _truth(state: SceneState, key: str, effect: str) -> Any:
-    if key not in state.truth:
-        raise SimulationError(
-            f"effect {effect!r} needs truth[{key!r}], which this scene does not provide"
-        )
-    return state.truth[key]
 
 
 @register_effect("stick_slip")
@@ -75,13 +65,13 @@ def stick_slip(
     name = "stick_slip"
     M = _positive(M_kg, "M_kg", name)
     k_l = _positive(k_l_N_m, "k_l_N_m", name)
-    motion = _truth(state, "motion", name)
+    motion = state.truth_value("motion", name)
     x = state.signal(target, name)
     t = state.time[target]
     if not np.isfinite(motion.start_s) or len(t) == 0:
         return state.with_truth(stick_slip_cycles=None)
-    mu_s = float(_truth(state, "mu_s", name))
-    mu_k = float(_truth(state, "mu_k", name))
+    mu_s = float(state.truth_value("mu_s", name))
+    mu_k = float(state.truth_value("mu_k", name))
     adhesion = float(state.truth.get("adhesion_N", 0.0))
     end_s = float(t[-1])
     w0 = float(natural_frequency(M, k_l))
@@ -130,7 +120,7 @@ def gross_deflection(
     """
     del rng  # deterministic
     name = "gross_deflection"
-    motion = _truth(state, "motion", name)
+    motion = state.truth_value("motion", name)
     if not hasattr(motion, "axial_deflection"):
         raise SimulationError(
             f"effect {name!r} needs a motion with an axial deflection (a drop scene); "
