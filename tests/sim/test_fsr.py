@@ -44,7 +44,7 @@ def block_derivative(trial: Trial) -> tuple[np.ndarray, pd.DataFrame]:
     means = v[:n].reshape(-1, BLOCK).mean(axis=1)
     deriv = np.diff(means) * RATE / BLOCK
     truth = (
-        trial.streams["truth"]
+        trial.streams["truth_contact"]
         .iloc[BLOCK - 1 + BLOCK : n : BLOCK]
         .reset_index(drop=True)
     )
@@ -126,12 +126,12 @@ def test_slip_events_are_sharp_positive_derivative_spikes() -> None:
         trial = scene.run_trial(i, 1)
         deriv, truth = block_derivative(trial)
         onsets = np.flatnonzero(
-            np.diff(np.r_[0, trial.streams["truth"]["slip_event"]]) > 0
+            np.diff(np.r_[0, trial.streams["truth_contact"]["slip_event"]]) > 0
         )
         assert trial.labels["n_slip_events"] == len(onsets)
         peaks = [deriv[max(0, o // BLOCK - 2) : o // BLOCK + 2].max() for o in onsets]
         quiet = (truth["sliding"] == 1) & ~block_max(
-            trial.streams["truth"]["slip_event"], len(deriv)
+            trial.streams["truth_contact"]["slip_event"], len(deriv)
         )
         assert min(peaks) > 3.0 * float(deriv[quiet.to_numpy()].max())
 
@@ -141,7 +141,7 @@ def test_removing_slip_events_removes_the_spikes() -> None:
     scene = build("~scene.effects.fsr_slip_events", "~scene.effects.fsr_disturbance")
     trial = scene.run_trial(0, 1)
     assert 0 == trial.labels["n_slip_events"]
-    assert 0 == int(trial.streams["truth"]["slip_event"].sum())
+    assert 0 == int(trial.streams["truth_contact"]["slip_event"].sum())
     deriv, truth = block_derivative(trial)
     assert float(np.abs(deriv[(truth["sliding"] == 1).to_numpy()]).max()) < 4.0  # V/s
 
@@ -153,7 +153,7 @@ def test_disturbances_stay_below_the_slip_band() -> None:
     signs = set()
     for i in range(6):
         trial = scene.run_trial(i, 2)
-        truth = trial.streams["truth"]
+        truth = trial.streams["truth_contact"]
         dist = truth["disturbance"] == 1
         assert dist.any()
         assert 0 == int(truth["slip_event"][dist].sum())
@@ -175,7 +175,7 @@ def test_removing_disturbances_leaves_a_flat_hold() -> None:
     """Without fsr_disturbance the hold carries no bump: the force is flat and nothing is flagged."""
     scene = build("~scene.effects.fsr_disturbance")
     trial = scene.run_trial(0, 2)
-    truth = trial.streams["truth"]
+    truth = trial.streams["truth_contact"]
     assert 0 == int(truth["disturbance"].sum())
     hold = (truth["t"] > 0.35) & (truth["t"] < 0.85)
     np.testing.assert_allclose(truth["force"][hold], trial.labels["normal_force_N"])
@@ -201,7 +201,8 @@ def test_touch_step_only_with_the_touch_effect() -> None:
     early, late = w[t < 0.29], w[(t > 0.32) & (t < 0.8)]
     assert 0.0 == pytest.approx(float(early.mean() - late.mean()), abs=2e-3)
     assert 0.0 == pytest.approx(
-        float(no_touch.streams["truth"]["force"][0]) - no_touch.labels["normal_force_N"]
+        float(no_touch.streams["truth_contact"]["force"][0])
+        - no_touch.labels["normal_force_N"]
     )
 
 
@@ -213,7 +214,7 @@ def test_force_effects_follow_dropped_frames() -> None:
         "fsr_touch": {"rise_s": 0.0},
     }
     trial = Scene("fsr_probe_slide", model, effects).run_trial(0, 4)
-    fsr, truth = trial.streams["fsr"], trial.streams["truth"]
+    fsr, truth = trial.streams["fsr"], trial.streams["truth_contact"]
     assert len(fsr) < len(truth)
     expected = voltage_from_force(np.interp(fsr["t"], truth["t"], truth["force"]))
     np.testing.assert_allclose(fsr["voltage"], expected, atol=1e-9)
@@ -229,10 +230,10 @@ def test_scene_builds_a_reproducible_dataset() -> None:
     scene = build_scene(cfg.scene)
     ds = scene.simulate(3, seed=0)
     assert "fsr" == ds.sensor
-    assert ["fsr", "truth"] == sorted(ds.streams)
+    assert ["fsr", "truth_contact"] == sorted(ds.streams)
     assert ("voltage",) == ds.streams["fsr"].channels
     assert ("force", "slip_event", "sliding", "disturbance") == ds.streams[
-        "truth"
+        "truth_contact"
     ].channels
     assert 2000.0 == ds.streams["fsr"].rate_hz
     assert ["slip_onset_s", "normal_force_N", "pass_s", "n_slip_events"] == list(
@@ -268,7 +269,7 @@ def test_cli_simulate_writes_a_loadable_dataset(tmp_path: object) -> None:
     )
     ds = load_dataset(out)
     assert 2 == len(ds)
-    assert {"fsr", "truth"} == set(ds.streams)
+    assert {"fsr", "truth_contact"} == set(ds.streams)
 
 
 @pytest.mark.parametrize(

@@ -69,7 +69,7 @@ def _with_force(state: SceneState, force: np.ndarray, effect: str) -> SceneState
         delta[changed] = voltage_from_force(
             force[changed], coeffs, out_range
         ) - voltage_from_force(old[changed], coeffs, out_range)
-    t_fsr, t_truth = state.time["fsr"], state.time["truth"]
+    t_fsr, t_truth = state.time["fsr"], state.time["truth_contact"]
     if t_fsr is not t_truth and not np.array_equal(t_fsr, t_truth):
         delta = np.interp(t_fsr, t_truth, delta)  # the fsr stream lost or moved frames
     return state.with_signal("force", force).with_signal("fsr", volts + delta)
@@ -91,7 +91,7 @@ def fsr_touch(
     rise = float(rise_s)
     if not np.isfinite(rise) or rise < 0:
         raise SimulationError(f"effect {name!r}: rise_s must be >= 0; got {rise_s!r}")
-    t = state.time["truth"]
+    t = state.time["truth_contact"]
     t0 = float(state.truth_value("touch_s", name))
     frac = (
         np.clip((t - t0) / rise, 0.0, 1.0) if rise > 0 else (t >= t0).astype(np.float64)
@@ -135,7 +135,7 @@ def fsr_slip_events(
         raise SimulationError(
             f"effect {name!r}: need decay_s > 0 and 0 <= jitter < 0.5"
         )
-    t = state.time["truth"]
+    t = state.time["truth_contact"]
     force = state.signal("force", name)
     s0, s1 = map(float, state.truth_value("phases", name)["slide"])
     fn = float(state.truth_value("normal_force_N", name))
@@ -206,7 +206,7 @@ def fsr_disturbance(
             f"effect {name!r}: the hold phase ({h1 - h0:.3g} s) cannot fit a {dur[1]} s bump "
             f"with margin_s={margin}; lengthen model.hold_s or shorten duration_s"
         )
-    t = state.time["truth"]
+    t = state.time["truth_contact"]
     fn = float(state.truth_value("normal_force_N", name))
     durations = _uniform(rng, dur, n)
     starts = lo + rng.uniform(0.0, 1.0, size=n) * (hi - lo - durations)

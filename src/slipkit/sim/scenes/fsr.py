@@ -155,8 +155,8 @@ class FSRProbeSlide:
                 rate_hz=self.rate_hz,
                 description="conditioned FSR voltage (falls as the force rises)",
             ),
-            "truth": StreamSpec(
-                "truth",
+            "truth_contact": StreamSpec(
+                "truth_contact",
                 ("force", "slip_event", "sliding", "disturbance"),
                 {"force": "N", "slip_event": "1", "sliding": "1", "disturbance": "1"},
                 rate_hz=self.rate_hz,
@@ -207,7 +207,7 @@ class FSRProbeSlide:
         sliding = ((t >= s0) & (t < s1)).astype(np.float64)
         volts = voltage_from_force(force, self.calibration, self.output_range_V)
         return SceneState(
-            time={"fsr": t, "truth": t},
+            time={"fsr": t, "truth_contact": t},
             signals={
                 "fsr": volts,
                 "force": force,
@@ -233,9 +233,9 @@ class FSRProbeSlide:
         s = state.signals
         streams = {
             "fsr": pd.DataFrame({"t": state.time["fsr"], "voltage": s["fsr"]}),
-            "truth": pd.DataFrame(
+            "truth_contact": pd.DataFrame(
                 {
-                    "t": state.time["truth"],
+                    "t": state.time["truth_contact"],
                     "force": s["force"],
                     "slip_event": s["slip_event"].astype(np.int8),
                     "sliding": s["sliding"].astype(np.int8),
