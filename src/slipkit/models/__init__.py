@@ -1,0 +1,36 @@
+"""Slip detectors as scikit-learn estimators, and the online rules that use them.
+
+``slipkit.models.online`` is numpy only (the gripper-PC runtime may import it);
+the estimators import scikit-learn, so they load on first access.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from slipkit.models.online import (
+    debounce,
+    detection_delay,
+    first_detection,
+    frames_to_ms,
+)
+
+if TYPE_CHECKING:
+    from slipkit.models.svm import TacTipSVM
+
+__all__ = [
+    "TacTipSVM",
+    "debounce",
+    "detection_delay",
+    "first_detection",
+    "frames_to_ms",
+]
+
+
+def __getattr__(name: str) -> Any:
+    # Lazy: importing slipkit.models.online must not pull in scikit-learn.
+    if name == "TacTipSVM":
+        from slipkit.models.svm import TacTipSVM
+
+        return TacTipSVM
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
