@@ -199,6 +199,14 @@ class Trial:
         return max(spans, default=0.0)
 
 
+def _table_digest(table: pd.DataFrame) -> bytes:
+    """Row hashes of a table; text columns are cast to ``str`` first so that object and
+    pandas string dtypes (which a Parquet round trip may swap) hash alike."""
+    as_text = {c: str for c in table.columns if not _is_numeric(table[c])}
+    hashed = pd.util.hash_pandas_object(table.astype(as_text), index=False)
+    return hashed.to_numpy().tobytes()
+
+
 def _is_numeric(series: pd.Series) -> bool:
     return pd.api.types.is_numeric_dtype(series) or pd.api.types.is_bool_dtype(series)
 
@@ -513,16 +521,7 @@ class Dataset:
         )
         for key, table in [("trials", self.trials), *sorted(self.tables.items())]:
             digest.update(key.encode())
-            digest.update(
-                pd.util.hash_pandas_object(
-                    table.astype(
-                        {c: str for c in table.columns if not _is_numeric(table[c])}
-                    ),
-                    index=False,
-                )
-                .to_numpy()
-                .tobytes()
-            )
+            digest.update(_table_digest(table))
         return digest.hexdigest()
 
     def _spec_json(self) -> dict[str, Any]:
