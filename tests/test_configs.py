@@ -12,7 +12,14 @@ from slipkit import config_dir
 
 CONFIGS = config_dir()
 #: config group -> the subcommand config that composes it
-GROUP_PRIMARY = {"scene": "simulate", "source": "import"}
+GROUP_PRIMARY = {
+    "scene": "simulate",
+    "source": "import",
+    "model": "train",
+    "task": "train",
+    "detector": "train",
+    "experiment": "train",
+}
 PRIMARY = sorted(p.stem for p in CONFIGS.glob("*.yaml"))
 GROUP_FILES = sorted(
     (group, p.stem) for group in GROUP_PRIMARY for p in (CONFIGS / group).glob("*.yaml")
@@ -38,6 +45,14 @@ def test_group_option_instantiates(group: str, option: str) -> None:
     """Each scene model and each importer in configs/ builds with hydra.utils.instantiate."""
     with initialize_config_dir(config_dir=str(CONFIGS), version_base="1.3"):
         cfg = compose(config_name=GROUP_PRIMARY[group], overrides=[f"{group}={option}"])
+    if group == "experiment":
+        # An experiment is global: it picks the task and the estimator (model or detector).
+        from slipkit.train.commands import estimator_node
+
+        assert instantiate(cfg.task) is not None
+        assert instantiate(estimator_node(cfg)) is not None
+        assert cfg.name == option
+        return
     node = cfg[group]
     target = node.model if group == "scene" else node
     obj = instantiate(target)

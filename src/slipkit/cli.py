@@ -30,6 +30,14 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "slipkit.sim.commands:simulate_main",
         "simulate a scene into a dataset folder (scene=...)",
     ),
+    "train": (
+        "slipkit.train.commands:train_main",
+        "train a model (experiment=...) and write a run folder",
+    ),
+    "evaluate": (
+        "slipkit.train.commands:evaluate_main",
+        "score a run on a dataset it was not trained on (run=... dataset=...)",
+    ),
 }
 
 

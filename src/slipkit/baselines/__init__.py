@@ -1,0 +1,1 @@
+"""Analytic slip detectors from the papers, as scikit-learn estimators (see ``base``)."""

@@ -1,0 +1,1 @@
+"""Metrics, detection latency, ROC and the tables and plots written into run folders."""

@@ -1,0 +1,97 @@
+"""The task contract: how an experiment turns a Dataset into fitted, scored estimators.
+
+A *model* (``configs/model/*.yaml``) is a scikit-learn estimator and knows nothing of
+datasets. A *task* (``configs/task/*.yaml``) is the recipe around it: which streams
+and labels become ``X`` and ``y``, how the dataset is split (by trial, by group, by
+30 s block), which metrics are reported, and which tables and plots are written.
+``slipkit train`` calls :meth:`Task.fit`; ``slipkit evaluate`` calls
+:meth:`Task.evaluate` with the fitted model on a dataset the model never saw.
+
+Analytic detectors are models too: their task's ``fit`` lets them choose a threshold
+on the training side and scores them like any learned model.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from slipkit.data.dataset import Dataset
+
+
+@dataclass
+class TaskResult:
+    """What :meth:`Task.fit` hands back to ``slipkit train``.
+
+    Attributes
+    ----------
+    model : estimator
+        The fitted estimator saved in the run folder (``model.joblib``).
+    metrics : dict
+        JSON-able metrics; must hold the task's :attr:`Task.objective` key.
+    summary : list of str
+        Lines printed at the end of the run (tables beside the papers' figures).
+    """
+
+    model: Any
+    metrics: dict[str, Any]
+    summary: list[str] = field(default_factory=list)
+
+
+class Task(ABC):
+    """One experiment's recipe: dataset -> (X, y) -> split -> fit -> metrics + files.
+
+    Subclasses store their parameters in ``__init__`` (built by
+    ``hydra.utils.instantiate`` from ``configs/task/*.yaml``) and implement
+    :meth:`fit` and :meth:`evaluate`. Both may write tables (``.csv``/``.md``) and
+    plots (``.png``) into ``out``; ``out`` is a temporary folder that becomes the run
+    (or evaluation) folder only when the call returns.
+    """
+
+    #: key of the metrics dict (dots for nesting) returned to a Hydra sweeper
+    objective: str = "accuracy"
+    #: "maximize" or "minimize" (the sweeper's direction for :attr:`objective`)
+    direction: str = "maximize"
+
+    @abstractmethod
+    def fit(self, model: Any, dataset: Dataset, *, seed: int, out: Path) -> TaskResult:
+        """Split ``dataset``, fit ``model`` on the training side, score every side."""
+
+    @abstractmethod
+    def evaluate(self, model: Any, dataset: Dataset, *, out: Path) -> dict[str, Any]:
+        """Score the fitted ``model`` on all of ``dataset`` (data it never saw)."""
+
+    def objective_value(self, metrics: Mapping[str, Any]) -> float:
+        """The number named by :attr:`objective` in ``metrics`` (dots descend)."""
+        node: Any = metrics
+        for key in self.objective.split("."):
+            if not isinstance(node, Mapping) or key not in node:
+                raise KeyError(
+                    f"{type(self).__name__}: objective {self.objective!r} not in metrics "
+                    f"(keys: {sorted(metrics)})"
+                )
+            node = node[key]
+        return float(node)
+
+
+def jsonable(value: Any) -> Any:
+    """``value`` with numpy scalars/arrays turned into plain JSON types; NaN -> None."""
+    if isinstance(value, Mapping):
+        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return [jsonable(v) for v in value.tolist()]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, Path):
+        return str(value)
+    return value

@@ -1,0 +1,1 @@
+"""Tasks: one module per model family (see :mod:`slipkit.train.task`)."""

@@ -1,0 +1,216 @@
+"""TacTip slip detection from pin velocities (James, Pestell, Lepora 2018).
+
+Frames are labelled 'slip' for the first ``n_slip`` velocity frames after the onset
+(None: every frame after it), runs are split in halves (train / test, by trial), the
+SVM's C and gamma can be tuned by Bayesian optimisation on the training half, and the
+online rule (``debounce_k`` consecutive slip frames) gives each test run a detection
+delay in frames and ms.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from slipkit.data.dataset import Dataset
+from slipkit.data.splits import split_by_trial
+from slipkit.evaluate.metrics import classification_metrics, delay_summary
+from slipkit.features.pins import SLIP, STATIC, Variant
+from slipkit.features.tactip import DatasetFeatures, dataset_features
+from slipkit.models.online import detection_delay, first_detection
+from slipkit.train.search import optuna_search
+from slipkit.train.task import Task, TaskResult
+
+log = logging.getLogger("slipkit.tactip")
+LABELS = (STATIC, SLIP)
+
+
+class TacTipFrames(Task):
+    """Per-frame slip / static classification of TacTip pin velocities.
+
+    Parameters
+    ----------
+    variant : {"dr_dtheta", "dr", "dtheta"}
+        Features (254 or 127 for the paper's 127 pins).
+    n_slip : int or None
+        Velocity frames after the onset labelled 'slip' (paper: 4 best; None = all).
+    test_size : float
+        Fraction of trials held out (paper: half).
+    debounce_k : int
+        Consecutive slip frames before slip is declared online (paper: 2).
+    search : mapping or None
+        In-run Bayesian optimisation: ``{n_trials, cv, scoring, space: {C: [lo, hi,
+        "log"], gamma: [...]}}``; None or ``n_trials: 0`` keeps the model's parameters.
+    stream, label : str
+        Pins stream and onset label names.
+    """
+
+    objective = "test.accuracy"
+    direction = "maximize"
+
+    def __init__(
+        self,
+        *,
+        variant: Variant = "dr_dtheta",
+        n_slip: int | None = 4,
+        test_size: float = 0.5,
+        debounce_k: int = 2,
+        search: Mapping[str, Any] | None = None,
+        stream: str = "pins",
+        label: str = "slip_onset_s",
+    ) -> None:
+        self.variant = variant
+        self.n_slip = n_slip
+        self.test_size = test_size
+        self.debounce_k = debounce_k
+        self.search = search
+        self.stream = stream
+        self.label = label
+
+    # -- data -----------------------------------------------------------------
+    def features(self, dataset: Dataset) -> DatasetFeatures:
+        """(X, y, t, groups) of every velocity frame of ``dataset``."""
+        return dataset_features(
+            dataset,
+            variant=self.variant,
+            n_slip=self.n_slip,
+            stream=self.stream,
+            label=self.label,
+        )
+
+    def rate_hz(self, dataset: Dataset) -> float:
+        spec = dataset.streams[self.stream]
+        if spec.rate_hz is None:
+            raise ValueError(f"stream {self.stream!r} has no frame rate")
+        return float(spec.rate_hz)
+
+    # -- fit / score ------------------------------------------------------------
+    def fit_model(
+        self, model: Any, feats: DatasetFeatures, *, seed: int
+    ) -> tuple[Any, dict[str, Any]]:
+        """Fit ``model`` on ``feats`` (after the optional Optuna search)."""
+        info: dict[str, Any] = {}
+        search = dict(self.search or {})
+        if int(search.get("n_trials", 0)) > 0:
+            best, score, history = optuna_search(
+                model,
+                feats.X,
+                feats.y,
+                feats.groups,
+                space=search["space"],
+                n_trials=int(search["n_trials"]),
+                cv=int(search.get("cv", 3)),
+                scoring=str(search.get("scoring", "balanced_accuracy")),
+                seed=seed,
+            )
+            model.set_params(**best)
+            info["search"] = {
+                "best_params": best,
+                "best_cv_score": score,
+                "scoring": str(search.get("scoring", "balanced_accuracy")),
+                "history": history,
+            }
+        model.fit(feats.X, feats.y)
+        info["params"] = _svm_params(model)
+        return model, info
+
+    def score(
+        self, model: Any, dataset: Dataset, feats: DatasetFeatures
+    ) -> tuple[dict[str, Any], pd.DataFrame]:
+        """Frame metrics, per-trial online detection and a per-frame predictions table."""
+        pred = np.asarray(model.predict(feats.X))
+        metrics = classification_metrics(feats.y, pred, LABELS)
+        rate = self.rate_hz(dataset)
+        delays: list[float] = []
+        false_alarms = 0
+        for tid in dict.fromkeys(feats.groups):
+            rows = feats.groups == tid
+            onset = np.flatnonzero(feats.y[rows] == SLIP)
+            if len(onset) == 0:
+                fired = first_detection(pred[rows], self.debounce_k)
+                false_alarms += fired is not None
+                continue
+            d = detection_delay(pred[rows], int(onset[0]), self.debounce_k)
+            delays.append(np.nan if d is None else float(d))
+        metrics["detection"] = {
+            "debounce_k": self.debounce_k,
+            **delay_summary(delays, rate),
+            "false_alarm_trials_without_slip": false_alarms,
+        }
+        table = pd.DataFrame(
+            {"trial_id": feats.groups, "t": feats.t, "label": feats.y, "pred": pred}
+        )
+        return metrics, table
+
+    def fit(self, model: Any, dataset: Dataset, *, seed: int, out: Path) -> TaskResult:
+        split = split_by_trial(
+            dataset, test_size=self.test_size, val_size=0.0, seed=seed
+        )
+        train, _, test = split.apply(dataset)
+        f_train, f_test = self.features(train), self.features(test)
+        log.info(
+            "frames: %d train (%d trials), %d test (%d trials)",
+            len(f_train.y),
+            len(train),
+            len(f_test.y),
+            len(test),
+        )
+        model, info = self.fit_model(model, f_train, seed=seed)
+        m_train, _ = self.score(model, train, f_train)
+        m_test, table = self.score(model, test, f_test)
+        table.to_csv(out / "test_predictions.csv", index=False)
+        metrics = {
+            "variant": self.variant,
+            "n_slip": self.n_slip,
+            "n_features": int(f_train.X.shape[1]),
+            "split": {"train": list(split.train), "test": list(split.test)},
+            **info,
+            "train": m_train,
+            "test": m_test,
+            "majority_baseline_test": float(np.mean(f_test.y == STATIC)),
+        }
+        return TaskResult(model, metrics, _summary(metrics))
+
+    def evaluate(self, model: Any, dataset: Dataset, *, out: Path) -> dict[str, Any]:
+        feats = self.features(dataset)
+        metrics, table = self.score(model, dataset, feats)
+        table.to_csv(out / "predictions.csv", index=False)
+        return {
+            "test": metrics,
+            "majority_baseline_test": float(np.mean(feats.y == STATIC)),
+        }
+
+
+def _svm_params(model: Any) -> dict[str, Any]:
+    params = {"kernel": getattr(model, "kernel", None), "C": getattr(model, "C", None)}
+    gamma = getattr(model, "gamma_", None)
+    if gamma is not None:
+        params["gamma"] = float(gamma)
+        params["kernel_scale"] = float(model.kernel_scale_)
+    return params
+
+
+def _summary(metrics: Mapping[str, Any]) -> list[str]:
+    test = metrics["test"]
+    det = test["detection"]
+    p = metrics["params"]
+    ks = (
+        f", KS {p['kernel_scale']:.4g} (gamma {p['gamma']:.3g})" if "gamma" in p else ""
+    )
+    return [
+        f"TacTip {p['kernel']} SVM on {metrics['variant']} (N={metrics['n_slip']}): "
+        f"C {p['C']:.4g}{ks}",
+        f"  test frames {test['accuracy'] * 100:.2f} % correct "
+        f"(majority {metrics['majority_baseline_test'] * 100:.2f} %), balanced "
+        f"{test['balanced_accuracy']:.3f}",
+        f"  online ({det['debounce_k']} frames): {det['detected']}/{det['n_trials']} slips "
+        f"detected, median delay {det['median_frames']} frames = {det['median_ms']:.1f} ms",
+    ]
+
+
+__all__: Sequence[str] = ["TacTipFrames"]
