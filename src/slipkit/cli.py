@@ -71,7 +71,15 @@ def main(argv: Sequence[str] | None = None) -> None:
         print(f"slipkit: unknown subcommand {sub!r}\n\n{_usage()}", file=sys.stderr)
         raise SystemExit(2)
 
-    import hydra
+    try:
+        import hydra
+    except ImportError:  # a runtime-only install (gripper PC): numpy + onnxruntime
+        print(
+            f"slipkit {sub}: needs the training extra: pip install 'slipkit[train]' "
+            "(a gripper PC runs bundles with slipkit-run)",
+            file=sys.stderr,
+        )
+        raise SystemExit(2) from None
 
     from slipkit import config_dir
     from slipkit.errors import SlipkitError
