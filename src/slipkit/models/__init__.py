@@ -16,10 +16,18 @@ from slipkit.models.online import (
 )
 
 if TYPE_CHECKING:
+    from slipkit.models.force import (
+        ForceMLP,
+        LocalLinearRegressor,
+        WeightedNormalsRegressor,
+    )
     from slipkit.models.svm import TacTipSVM
 
 __all__ = [
+    "ForceMLP",
+    "LocalLinearRegressor",
     "TacTipSVM",
+    "WeightedNormalsRegressor",
     "debounce",
     "detection_delay",
     "first_detection",
@@ -33,4 +41,8 @@ def __getattr__(name: str) -> Any:
         from slipkit.models.svm import TacTipSVM
 
         return TacTipSVM
+    if name in ("ForceMLP", "LocalLinearRegressor", "WeightedNormalsRegressor"):
+        from slipkit.models import force
+
+        return getattr(force, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,0 +1,740 @@
+"""Analytic stream detectors on simulated (or recorded) trials: ROC threshold, scores, latency.
+
+:class:`StreamDetection` turns one stream of every trial into a detector's ``X`` (its
+channels, in time order, one recording per trial, ``segments`` = trial) and per-sample
+labels ``y``: a truth-stream column (``truth_column``, e.g. the FSR scene's
+``slip_event``) or the onset label (``t >= slip_onset_s``). Trials are split in halves
+(by trial); ``fit`` lets the detector choose its threshold on the training half's ROC
+(or record the ROC of a fixed one) and every side is scored:
+
+* **samples** -- AUC and TPR/TNR/FPR/FNR per sample (the base detector's calibration);
+* **events** -- as the FSR paper counts (30 induced slips, specificity over non-slip
+  time): each labelled event (a run of slip samples) is one positive unit, detected if
+  the detector fires within it (plus ``event_tolerance_s``); the non-slip time outside
+  the events is cut into ``negative_window_s`` windows, each a negative unit that is a
+  false positive if the detector fires in it. The unit score is the largest sample
+  score, which gives an event ROC and AUC; ``roc_unit="event"`` chooses the threshold
+  on it instead of on samples. Disturbances (a truth column) are counted apart: how many
+  made the detector fire;
+* **trials** -- a slip trial is a true positive if the detector fires during its slip
+  (after the onset), and every trial's time before the onset is a negative that is a
+  false positive if the detector fires there;
+* **latency** -- first detection at or after the onset, in ms, per trial; with
+  ``reference_label`` (the BioTac scene's IMU onset) the lead (-) or lag (+) against it,
+  mean +- sd overall and per group (``group_by``), beside the paper's figures.
+
+``compare`` adds detectors scored the same way beside the run's estimator, each on its
+own stream (the BioTac pressure detector reads ``pac`` at 2.2 kHz, the force derivative
+``truth_force`` at 300 Hz). They are fitted on the same training trials; ``evaluate``
+can score only those with a fixed ``threshold`` (the run saves the estimator alone).
+Detectors are causal, so cutting a recording at the end of its scored part
+(``score_until``: the last sample of a truth column, e.g. the FSR pass before the probe
+leaves the sensor) changes no score before it.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+from hydra.utils import instantiate
+from numpy.typing import NDArray
+from sklearn.base import clone
+from sklearn.metrics import roc_auc_score, roc_curve
+
+from slipkit.baselines.base import segment_bounds
+from slipkit.data.dataset import Dataset
+from slipkit.data.splits import split_by_trial
+from slipkit.errors import SlipkitError
+from slipkit.train.task import Task, TaskResult
+
+log = logging.getLogger("slipkit.detection")
+FloatArray = NDArray[np.float64]
+
+
+@dataclass
+class Recordings:
+    """One stream of a set of trials, concatenated for a detector.
+
+    Attributes
+    ----------
+    X : ndarray (n_samples, n_channels)
+        The stream's channels, trial after trial.
+    y : ndarray of int (n_samples,)
+        1 = slip sample.
+    t : ndarray (n_samples,)
+        Sample times (s), restarting in every trial.
+    segments : ndarray of int (n_samples,)
+        Trial index of every sample.
+    trial_ids, groups : list of str
+        Per trial.
+    onset_s, reference_s : ndarray (n_trials,)
+        Slip onset and reference onset per trial (s; NaN = none).
+    disturbance : ndarray of bool (n_samples,) or None
+        Disturbance samples (a truth column), if asked for.
+    rate_hz : float
+        The stream's sample rate (Hz).
+    """
+
+    X: FloatArray
+    y: NDArray[np.int_]
+    t: FloatArray
+    segments: NDArray[np.int_]
+    trial_ids: list[str]
+    groups: list[str]
+    onset_s: FloatArray
+    reference_s: FloatArray
+    disturbance: NDArray[np.bool_] | None
+    rate_hz: float
+
+    def bounds(self) -> list[tuple[int, int]]:
+        """(start, stop) of every trial's samples."""
+        return segment_bounds(len(self.X), self.segments)
+
+
+def _runs(flags: NDArray[np.bool_]) -> list[tuple[int, int]]:
+    """(start, stop) of every run of True."""
+    f = np.concatenate([[False], flags, [False]]).astype(np.int8)
+    d = np.diff(f)
+    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True))
+
+
+def _roc_choice(y: NDArray[np.int_], s: FloatArray, point: str) -> float:
+    """The threshold at the Youden (or closest-to-corner) point of the ROC of (y, s)."""
+    low = np.finfo(np.float64).min
+    fpr, tpr, thr = roc_curve(y, np.where(np.isfinite(s), s, low))
+    ok = np.isfinite(thr) & (thr > low)
+    fpr, tpr, thr = fpr[ok], tpr[ok], thr[ok]
+    k = (
+        int(np.argmax(tpr - fpr))
+        if point == "youden"
+        else int(np.argmin(np.hypot(fpr, 1.0 - tpr)))
+    )
+    return float(thr[k])
+
+
+def _auc(y: NDArray[np.int_], s: FloatArray) -> float:
+    if len(np.unique(y)) < 2:
+        return float("nan")
+    low = np.finfo(np.float64).min
+    return float(roc_auc_score(y, np.where(np.isfinite(s), s, low)))
+
+
+def _rates(y: NDArray[np.int_], pred: NDArray[np.bool_]) -> dict[str, Any]:
+    pos, neg = y == 1, y == 0
+    tp, fn = int(pred[pos].sum()), int((~pred[pos]).sum())
+    fp, tn = int(pred[neg].sum()), int((~pred[neg]).sum())
+
+    def ratio(a: int, b: int) -> float:
+        return a / (a + b) if a + b else float("nan")
+
+    return {
+        "tp": tp,
+        "fn": fn,
+        "fp": fp,
+        "tn": tn,
+        "tpr": ratio(tp, fn),
+        "tnr": ratio(tn, fp),
+        "fpr": ratio(fp, tn),
+        "fnr": ratio(fn, tp),
+    }
+
+
+def _mean_sd(values: Sequence[float]) -> dict[str, Any]:
+    v = np.asarray([x for x in values if x is not None and math.isfinite(x)])
+    return {
+        "n": len(v),
+        "mean": float(v.mean()) if len(v) else float("nan"),
+        "sd": float(v.std(ddof=1)) if len(v) > 1 else float("nan"),
+        "median": float(np.median(v)) if len(v) else float("nan"),
+    }
+
+
+class StreamDetection(Task):
+    """Fit and score a :class:`~slipkit.baselines.base.StreamDetector` on trials.
+
+    Parameters
+    ----------
+    stream : str
+        The stream the estimator reads.
+    channels : list of str or None
+        Its channels, in order (None: all of them).
+    label : str or None
+        Onset label (s): the slip onset of every trial (latency is measured from it);
+        samples at or after it are slip unless ``truth_column`` is set.
+    truth_stream, truth_column : str or None
+        Per-sample slip labels from a truth column (non-zero = slip), looked up at each
+        sample's time (latest truth row at or before it).
+    score_until : str or None
+        A truth column: each trial is scored up to its last non-zero sample (None: all).
+    disturbance_column : str or None
+        A truth column marking disturbances (counted: did the detector fire in one?).
+    roc_unit : {"sample", "event"}
+        The ROC a free threshold is chosen on (see the module docstring).
+    negative_window_s : float
+        Length of a negative unit of the event counts (s).
+    event_tolerance_s : float
+        A detection up to this long after an event still counts for it (s).
+    reference_label : str or None
+        A second onset (the IMU's) to report the detection lead / lag against.
+    group_by : str or None
+        Trial group column (e.g. ``object``) for per-group latency.
+    test_size : float
+        Fraction of trials held out for the test side.
+    name, unit : str
+        How the summary names the estimator and its threshold's unit.
+    paper : mapping or None
+        Published figures printed beside the measured ones: ``threshold``, ``auc``,
+        ``tpr``, ``tnr`` (fractions), ``reference_ms`` ({group: [mean, sd]}).
+    compare : list of mappings or None
+        Further detectors: ``{name, detector, stream, channels, unit, paper}``
+        (``detector`` an estimator or a ``_target_`` mapping).
+    objective : str
+        Metrics key returned to a sweeper (dots descend).
+    """
+
+    objective = "test.samples.auc"
+    direction = "maximize"
+
+    def __init__(
+        self,
+        *,
+        stream: str,
+        channels: Sequence[str] | None = None,
+        label: str | None = "slip_onset_s",
+        truth_stream: str | None = None,
+        truth_column: str | None = None,
+        score_until: str | None = None,
+        disturbance_column: str | None = None,
+        roc_unit: str = "sample",
+        negative_window_s: float = 0.01,
+        event_tolerance_s: float = 0.0,
+        reference_label: str | None = None,
+        group_by: str | None = None,
+        test_size: float = 0.5,
+        name: str = "detector",
+        unit: str = "",
+        paper: Mapping[str, Any] | None = None,
+        compare: Sequence[Mapping[str, Any]] | None = None,
+        objective: str = "test.samples.auc",
+    ) -> None:
+        if roc_unit not in ("sample", "event"):
+            raise SlipkitError(
+                f"task.roc_unit must be 'sample' or 'event'; got {roc_unit!r}"
+            )
+        if (truth_column is None) != (truth_stream is None):
+            raise SlipkitError("task.truth_stream and task.truth_column go together")
+        if truth_column is None and label is None:
+            raise SlipkitError("task: set label (onset) or truth_stream + truth_column")
+        self.stream = stream
+        self.channels = None if channels is None else [str(c) for c in channels]
+        self.label = label
+        self.truth_stream = truth_stream
+        self.truth_column = truth_column
+        self.score_until = score_until
+        self.disturbance_column = disturbance_column
+        self.roc_unit = roc_unit
+        self.negative_window_s = float(negative_window_s)
+        self.event_tolerance_s = float(event_tolerance_s)
+        self.reference_label = reference_label
+        self.group_by = group_by
+        self.test_size = float(test_size)
+        self.name = name
+        self.unit = unit
+        self.paper = dict(paper or {})
+        self.compare = [dict(c) for c in (compare or [])]
+        self.objective = objective
+
+    # -- data -------------------------------------------------------------------------
+    def _truth(self, trial: Any, column: str) -> tuple[FloatArray, FloatArray]:
+        if self.truth_stream is None:
+            raise SlipkitError(f"task: {column!r} needs task.truth_stream")
+        df = trial.streams.get(self.truth_stream)
+        if df is None or column not in df:
+            raise SlipkitError(
+                f"trial {trial.trial_id}: truth stream {self.truth_stream!r} has no "
+                f"column {column!r}"
+            )
+        if not len(df):
+            raise SlipkitError(
+                f"trial {trial.trial_id}: truth stream {self.truth_stream!r} is empty"
+            )
+        return df["t"].to_numpy(np.float64), df[column].to_numpy(np.float64)
+
+    def _at(self, t_truth: FloatArray, v: FloatArray, t: FloatArray) -> FloatArray:
+        # latest truth row at or before each sample (truth and stream may differ in rate)
+        k = np.clip(np.searchsorted(t_truth, t, side="right") - 1, 0, len(v) - 1)
+        return v[k]
+
+    def recordings(
+        self, dataset: Dataset, stream: str, channels: Sequence[str] | None
+    ) -> Recordings:
+        """``X``, ``y``, times and per-trial facts of ``stream`` over ``dataset``."""
+        if stream not in dataset.streams:
+            raise SlipkitError(
+                f"dataset {dataset.name!r} has no stream {stream!r}; streams: "
+                f"{sorted(dataset.streams)}"
+            )
+        spec = dataset.streams[stream]
+        chans = list(channels) if channels is not None else list(spec.channels)
+        Xs, ys, ts, segs, dists = [], [], [], [], []
+        ids, groups, onsets, refs = [], [], [], []
+        for k, trial in enumerate(dataset):
+            df = trial.streams.get(stream)
+            if df is None:
+                raise SlipkitError(f"trial {trial.trial_id}: no stream {stream!r}")
+            missing = [c for c in chans if c not in df]
+            if missing:
+                raise SlipkitError(
+                    f"trial {trial.trial_id}: stream {stream!r} has no channel(s) "
+                    f"{missing}; it has {[c for c in df.columns if c != 't']}"
+                )
+            t = df["t"].to_numpy(np.float64)
+            onset = (
+                float(trial.labels.get(self.label, np.nan)) if self.label else np.nan
+            )
+            if self.truth_column is not None:
+                tt, v = self._truth(trial, self.truth_column)
+                y = self._at(tt, v, t) > 0
+                if self.label is None and y.any():
+                    onset = float(t[np.argmax(y)])
+            else:
+                y = t >= onset if math.isfinite(onset) else np.zeros(len(t), bool)
+            keep = len(t)
+            if self.score_until is not None:
+                tt, v = self._truth(trial, self.score_until)
+                on = np.flatnonzero(v > 0)
+                if len(on):
+                    keep = int(np.searchsorted(t, tt[on[-1]], side="right"))
+            if keep == 0:
+                raise SlipkitError(
+                    f"trial {trial.trial_id}: stream {stream!r} has no samples to score"
+                )
+            dist = None
+            if self.disturbance_column is not None:
+                tt, v = self._truth(trial, self.disturbance_column)
+                dist = self._at(tt, v, t)[:keep] > 0
+                dists.append(dist)
+            Xs.append(df[chans].to_numpy(np.float64)[:keep])
+            ys.append(y[:keep].astype(int))
+            ts.append(t[:keep])
+            segs.append(np.full(keep, k))
+            ids.append(trial.trial_id)
+            groups.append(
+                str(trial.meta.get(self.group_by, "")) if self.group_by else ""
+            )
+            onsets.append(onset)
+            ref = (
+                float(trial.labels.get(self.reference_label, np.nan))
+                if self.reference_label
+                else np.nan
+            )
+            refs.append(ref)
+        if not Xs:
+            raise SlipkitError(f"dataset {dataset.name!r} holds no trials")
+        rate = spec.rate_hz
+        if rate is None:
+            dt = np.median(np.diff(ts[0])) if len(ts[0]) > 1 else np.nan
+            rate = 1.0 / dt if np.isfinite(dt) and dt > 0 else 1.0
+        return Recordings(
+            X=np.concatenate(Xs),
+            y=np.concatenate(ys),
+            t=np.concatenate(ts),
+            segments=np.concatenate(segs),
+            trial_ids=ids,
+            groups=groups,
+            onset_s=np.asarray(onsets, dtype=np.float64),
+            reference_s=np.asarray(refs, dtype=np.float64),
+            disturbance=np.concatenate(dists) if dists else None,
+            rate_hz=float(rate),
+        )
+
+    # -- event units --------------------------------------------------------------------
+    def event_units(
+        self, rec: Recordings, scores: FloatArray
+    ) -> tuple[NDArray[np.int_], FloatArray, NDArray[np.int_]]:
+        """(label, max score, trial index) of every event unit (see the module doc)."""
+        tol = round(self.event_tolerance_s * rec.rate_hz)
+        width = max(1, round(self.negative_window_s * rec.rate_hz))
+        labels: list[int] = []
+        best: list[float] = []
+        trial: list[int] = []
+        for k, (a, b) in enumerate(rec.bounds()):
+            y = rec.y[a:b] > 0
+            s = scores[a:b]
+            covered = np.zeros(b - a, dtype=bool)
+            for r0, r1 in _runs(y):
+                hi = min(b - a, r1 + tol)
+                labels.append(1)
+                best.append(float(s[r0:hi].max()))
+                trial.append(k)
+                covered[r0:hi] = True
+            for g0, g1 in _runs(~covered):
+                for w0 in range(g0, g1, width):
+                    labels.append(0)
+                    best.append(float(s[w0 : min(g1, w0 + width)].max()))
+                    trial.append(k)
+        return (
+            np.asarray(labels, dtype=int),
+            np.asarray(best, dtype=np.float64),
+            np.asarray(trial, dtype=int),
+        )
+
+    # -- scoring --------------------------------------------------------------------------
+    def score(
+        self,
+        detector: Any,
+        rec: Recordings,
+        *,
+        extra_thresholds: Mapping[str, float] | None = None,
+    ) -> tuple[dict[str, Any], pd.DataFrame, dict[str, Any]]:
+        """Metrics, a per-trial table and the ROC curves of a fitted detector."""
+        scores = np.asarray(detector.decision_function(rec.X, segments=rec.segments))
+        thr = float(detector.threshold_)
+        metrics = self._at_threshold(rec, scores, thr)
+        metrics["threshold"] = thr
+        for key, value in (extra_thresholds or {}).items():
+            metrics[key] = {
+                "threshold": float(value),
+                **self._at_threshold(rec, scores, float(value), brief=True),
+            }
+        table = self._trial_table(rec, scores >= thr)
+        low = np.finfo(np.float64).min
+        curves: dict[str, Any] = {}
+        if len(np.unique(rec.y)) == 2:
+            fpr, tpr, _ = roc_curve(rec.y, np.where(np.isfinite(scores), scores, low))
+            curves["samples"] = (fpr, tpr)
+        ev_y, ev_s, _ = self.event_units(rec, scores)
+        if len(np.unique(ev_y)) == 2:
+            fpr, tpr, _ = roc_curve(ev_y, np.where(np.isfinite(ev_s), ev_s, low))
+            curves["events"] = (fpr, tpr)
+        return metrics, table, curves
+
+    def _at_threshold(
+        self,
+        rec: Recordings,
+        scores: FloatArray,
+        thr: float,
+        *,
+        brief: bool = False,
+    ) -> dict[str, Any]:
+        pred = scores >= thr
+        samples = {
+            "auc": _auc(rec.y, scores),
+            "n_pos": int((rec.y == 1).sum()),
+            "n_neg": int((rec.y == 0).sum()),
+            **_rates(rec.y, pred),
+        }
+        ev_y, ev_s, _ = self.event_units(rec, scores)
+        events = {
+            "auc": _auc(ev_y, ev_s),
+            "n_events": int((ev_y == 1).sum()),
+            "n_negative_windows": int((ev_y == 0).sum()),
+            **_rates(ev_y, ev_s >= thr),
+        }
+        events["sensitivity"], events["specificity"] = events["tpr"], events["tnr"]
+        out: dict[str, Any] = {"samples": samples, "events": events}
+        if rec.disturbance is not None:
+            runs = [
+                (a + r0, a + r1)
+                for a, b in rec.bounds()
+                for r0, r1 in _runs(rec.disturbance[a:b])
+            ]
+            fired = sum(bool(pred[r0:r1].any()) for r0, r1 in runs)
+            out["disturbances"] = {"n": len(runs), "fired": int(fired)}
+        if brief:
+            return out
+        trials = self._trial_table(rec, pred)
+        slip = trials["onset_s"].notna()
+        out["trials"] = {
+            "n": len(trials),
+            "n_slip": int(slip.sum()),
+            **_rates(
+                np.concatenate(
+                    [np.ones(int(slip.sum()), int), np.zeros(len(trials), int)]
+                ),
+                np.concatenate(
+                    [
+                        trials.loc[slip, "detected"].to_numpy(bool),
+                        trials["fired_before"].to_numpy(bool),
+                    ]
+                ),
+            ),
+        }
+        out["latency_ms"] = _mean_sd(trials["latency_ms"].tolist())
+        if rec.reference_s is not None and np.isfinite(rec.reference_s).any():
+            ref: dict[str, Any] = {"all": _mean_sd(trials["vs_reference_ms"].tolist())}
+            if self.group_by:
+                for g, part in trials.groupby("group", sort=True):
+                    ref[str(g)] = _mean_sd(part["vs_reference_ms"].tolist())
+            out["vs_reference_ms"] = ref
+        return out
+
+    def _trial_table(self, rec: Recordings, pred: NDArray[np.bool_]) -> pd.DataFrame:
+        rows = []
+        for k, (a, b) in enumerate(rec.bounds()):
+            t, p, y = rec.t[a:b], pred[a:b], rec.y[a:b] > 0
+            onset = rec.onset_s[k]
+            has_slip = math.isfinite(onset) and y.any()
+            before = p & (t < onset) if math.isfinite(onset) else p
+            after = np.flatnonzero(p & (t >= onset)) if has_slip else np.empty(0, int)
+            # detected: fires while a slip sample is labelled (or within the tolerance)
+            tol = self.event_tolerance_s
+            during = False
+            if has_slip:
+                for r0, r1 in _runs(y):
+                    stop = np.searchsorted(t, t[r1 - 1] + tol, side="right")
+                    during = during or bool(p[r0:stop].any())
+            first = float(t[after[0]]) if len(after) else float("nan")
+            rows.append(
+                {
+                    "trial_id": rec.trial_ids[k],
+                    "group": rec.groups[k],
+                    "onset_s": onset if has_slip else float("nan"),
+                    "first_detection_s": first,
+                    "latency_ms": (first - onset) * 1000.0
+                    if has_slip
+                    else float("nan"),
+                    "vs_reference_ms": (first - rec.reference_s[k]) * 1000.0,
+                    "fired_before": bool(before.any()),
+                    "detected": during,
+                }
+            )
+        return pd.DataFrame(rows)
+
+    # -- fit / evaluate ---------------------------------------------------------------------
+    def _entries(self, model: Any) -> list[dict[str, Any]]:
+        main = {
+            "name": self.name,
+            "detector": model,
+            "stream": self.stream,
+            "channels": self.channels,
+            "unit": self.unit,
+            "paper": self.paper,
+        }
+        out = [main]
+        for c in self.compare:
+            det = c.get("detector")
+            if isinstance(det, Mapping):
+                det = instantiate(dict(det))
+            if det is None:
+                raise SlipkitError(
+                    f"task.compare entry {c.get('name')!r} has no detector"
+                )
+            out.append(
+                {
+                    "name": str(c.get("name", type(det).__name__)),
+                    "detector": clone(det),
+                    "stream": str(c["stream"]),
+                    "channels": c.get("channels"),
+                    "unit": str(c.get("unit", "")),
+                    "paper": dict(c.get("paper") or {}),
+                }
+            )
+        return out
+
+    def _fit_one(self, det: Any, rec: Recordings) -> dict[str, Any]:
+        """Fit ``det`` on ``rec``; with ``roc_unit="event"`` choose on the event ROC."""
+        if self.roc_unit == "event" and det.get_params().get("threshold") is None:
+            # A provisional per-sample choice gives the scores; the event ROC then
+            # fixes the threshold and a second fit records the per-sample ROC at it.
+            det.fit(rec.X, rec.y, segments=rec.segments)
+            scores = det.decision_function(rec.X, segments=rec.segments)
+            ev_y, ev_s, _ = self.event_units(rec, scores)
+            if len(np.unique(ev_y)) < 2:
+                raise SlipkitError(
+                    "the event ROC needs slip events and non-slip time in the training "
+                    "trials"
+                )
+            chosen = _roc_choice(ev_y, ev_s, det.get_params()["roc_point"])
+            det.set_params(threshold=chosen)
+            det.fit(rec.X, rec.y, segments=rec.segments)
+            return {
+                "threshold_from": "event ROC (Youden)"
+                if det.roc_point == "youden"
+                else "event ROC (closest)"
+            }
+        det.fit(rec.X, rec.y, segments=rec.segments)
+        fixed = det.get_params().get("threshold") is not None
+        return {"threshold_from": "fixed (config)" if fixed else "sample ROC"}
+
+    def fit(self, model: Any, dataset: Dataset, *, seed: int, out: Path) -> TaskResult:
+        split = split_by_trial(
+            dataset, test_size=self.test_size, val_size=0.0, seed=seed
+        )
+        train, _, test = split.apply(dataset)
+        metrics: dict[str, Any] = {
+            "split": {"train": list(split.train), "test": list(split.test)},
+            "detectors": {},
+        }
+        curves: dict[str, Any] = {}
+        tables = []
+        for i, e in enumerate(self._entries(model)):
+            rec_tr = self.recordings(train, e["stream"], e["channels"])
+            rec_te = self.recordings(test, e["stream"], e["channels"])
+            info = self._fit_one(e["detector"], rec_tr)
+            extra = (
+                {"at_paper_threshold": float(e["paper"]["threshold"])}
+                if "threshold" in e["paper"]
+                and float(e["paper"]["threshold"]) != float(e["detector"].threshold_)
+                else None
+            )
+            m_tr, _, _ = self.score(e["detector"], rec_tr)
+            m_te, table, cv = self.score(e["detector"], rec_te, extra_thresholds=extra)
+            block = {
+                "estimator": type(e["detector"]).__name__,
+                "stream": e["stream"],
+                "unit": e["unit"],
+                "threshold": float(e["detector"].threshold_),
+                **info,
+                "params": {k: _plain(v) for k, v in e["detector"].get_params().items()},
+                "train": m_tr,
+                "test": m_te,
+                "paper": e["paper"],
+            }
+            if i == 0:
+                metrics.update({"name": e["name"], **block})
+                model = e["detector"]
+            else:
+                metrics["detectors"][e["name"]] = block
+            curves[e["name"]] = cv
+            tables.append(table.assign(detector=e["name"]))
+        pd.concat(tables).to_csv(out / "test_trials.csv", index=False)
+        _plot_roc(curves, out / "roc.png")
+        return TaskResult(model, metrics, self.summary(metrics))
+
+    def evaluate(self, model: Any, dataset: Dataset, *, out: Path) -> dict[str, Any]:
+        metrics: dict[str, Any] = {"detectors": {}}
+        curves: dict[str, Any] = {}
+        tables = []
+        for i, e in enumerate(self._entries(model)):
+            rec = self.recordings(dataset, e["stream"], e["channels"])
+            det = e["detector"]
+            if i > 0:
+                if det.get_params().get("threshold") is None:
+                    metrics["detectors"][e["name"]] = {
+                        "skipped": "its ROC-chosen threshold is not saved in the run; "
+                        "give it a fixed threshold to evaluate it"
+                    }
+                    continue
+                det.fit(
+                    rec.X, rec.y, segments=rec.segments
+                )  # fixed: records the ROC only
+            m, table, cv = self.score(det, rec)
+            block = {"estimator": type(det).__name__, "test": m, "paper": e["paper"]}
+            if i == 0:
+                metrics.update({"name": e["name"], **block})
+            else:
+                metrics["detectors"][e["name"]] = block
+            curves[e["name"]] = cv
+            tables.append(table.assign(detector=e["name"]))
+        pd.concat(tables).to_csv(out / "trials.csv", index=False)
+        _plot_roc(curves, out / "roc.png")
+        return metrics
+
+    # -- report ------------------------------------------------------------------------------
+    def summary(self, metrics: Mapping[str, Any]) -> list[str]:
+        """Lines printed after training: each detector beside the paper's figures."""
+        lines = []
+        blocks = [(metrics["name"], metrics), *metrics["detectors"].items()]
+        for name, b in blocks:
+            lines.extend(_summary_block(name, b, self.group_by))
+        return lines
+
+
+def _plain(v: Any) -> Any:
+    if isinstance(v, (list, tuple)):
+        return [_plain(x) for x in v]
+    if isinstance(v, (str, int, float, bool)) or v is None:
+        return v
+    return str(v)
+
+
+def _pct(v: Any) -> str:
+    return (
+        "n/a" if v is None or not math.isfinite(float(v)) else f"{100 * float(v):.2f} %"
+    )
+
+
+def _num(v: Any, fmt: str = ".4g") -> str:
+    return "n/a" if v is None or not math.isfinite(float(v)) else format(float(v), fmt)
+
+
+def _summary_block(name: str, b: Mapping[str, Any], group_by: str | None) -> list[str]:
+    te, paper, unit = b["test"], b.get("paper", {}), b.get("unit", "")
+
+    def beside(key: str, fmt: Any) -> str:
+        return f" (paper {fmt(paper[key])})" if key in paper else ""
+
+    s, ev, tr = te["samples"], te["events"], te["trials"]
+    lines = [
+        f"{name} ({b['estimator']} on {b['stream']}): threshold {_num(te['threshold'])} "
+        f"{unit} from {b['threshold_from']}{beside('threshold', _num)}",
+        f"  test samples: AUC {_num(s['auc'], '.4f')}, TPR {_pct(s['tpr'])}, "
+        f"TNR {_pct(s['tnr'])}, FPR {_pct(s['fpr'])}, FNR {_pct(s['fnr'])}",
+        f"  test events: AUC {_num(ev['auc'], '.4f')}{beside('auc', _num)}, "
+        f"sensitivity {_pct(ev['sensitivity'])}{beside('tpr', _pct)} "
+        f"({ev['tp']}/{ev['n_events']}), specificity {_pct(ev['specificity'])}"
+        f"{beside('tnr', _pct)} ({ev['fp']} of {ev['n_negative_windows']} non-slip "
+        "windows fired)",
+        f"  test trials: {tr['tp']}/{tr['n_slip']} slips detected, {tr['fp']}/{tr['n']} "
+        f"fired before the onset; latency from onset {_num(te['latency_ms']['mean'], '.1f')}"
+        f" +- {_num(te['latency_ms']['sd'], '.1f')} ms",
+    ]
+    if "disturbances" in te:
+        d = te["disturbances"]
+        lines.append(
+            f"  disturbances: {d['fired']} of {d['n']} fired"
+            + (f" (paper: {paper['disturbances']})" if "disturbances" in paper else "")
+        )
+    if "at_paper_threshold" in te:
+        a = te["at_paper_threshold"]
+        lines.append(
+            f"  at the paper's threshold {_num(a['threshold'])} {unit}: events sensitivity "
+            f"{_pct(a['events']['sensitivity'])}, specificity {_pct(a['events']['specificity'])}"
+            + (
+                f", disturbances fired {a['disturbances']['fired']}/{a['disturbances']['n']}"
+                if "disturbances" in a
+                else ""
+            )
+        )
+    if "vs_reference_ms" in te:
+        ref = te["vs_reference_ms"]
+        pref = paper.get("reference_ms", {})
+        for g, st in ref.items():
+            p = pref.get(g)
+            ptxt = f" (paper {p[0]:+.1f} +- {p[1]:.1f} ms)" if p else ""
+            label = "all trials" if g == "all" else f"{group_by}={g}"
+            lines.append(
+                f"  vs reference onset, {label}: {_num(st['mean'], '+.1f')} +- "
+                f"{_num(st['sd'], '.1f')} ms over {st['n']}{ptxt}"
+            )
+    return lines
+
+
+def _plot_roc(curves: Mapping[str, Mapping[str, Any]], path: Path) -> None:
+    fig, ax = plt.subplots(figsize=(4.5, 4.5))
+    for name, cv in curves.items():
+        for unit, (fpr, tpr) in cv.items():
+            ax.plot(fpr, tpr, label=f"{name} ({unit})")
+    ax.plot([0, 1], [0, 1], color="0.7", lw=0.8, ls="--")
+    ax.set_xlabel("false positive rate")
+    ax.set_ylabel("true positive rate")
+    ax.set_title("ROC on the test trials")
+    ax.legend(fontsize=7, loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+__all__ = ["Recordings", "StreamDetection"]

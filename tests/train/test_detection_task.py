@@ -1,0 +1,160 @@
+"""StreamDetection task: labels, event and trial counts, and train + evaluate end to end."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hydra import compose, initialize_config_dir
+from tests.strategies import make_dataset
+
+from slipkit import config_dir
+from slipkit.baselines.biotac import ForceDerivative
+from slipkit.data import save_dataset
+from slipkit.errors import SlipkitError
+from slipkit.sim.commands import build_scene
+from slipkit.train.commands import evaluate_main, train_main
+from slipkit.train.tasks.detection import Recordings, StreamDetection
+
+
+def recordings(y: list[int], rate: float = 100.0) -> Recordings:
+    """One trial of ``len(y)`` samples with the given per-sample labels."""
+    n = len(y)
+    yy = np.asarray(y, dtype=int)
+    onset = float(np.argmax(yy) / rate) if yy.any() else float("nan")
+    return Recordings(
+        X=np.zeros((n, 1)),
+        y=yy,
+        t=np.arange(n) / rate,
+        segments=np.zeros(n, dtype=int),
+        trial_ids=["a"],
+        groups=[""],
+        onset_s=np.array([onset]),
+        reference_s=np.array([onset + 0.05]),
+        disturbance=None,
+        rate_hz=rate,
+    )
+
+
+def test_event_units_cut_non_slip_time_into_windows() -> None:
+    """Two events are two positives; the 10 other samples make 5 two-sample negatives."""
+    task = StreamDetection(stream="s", label="slip_onset_s", negative_window_s=0.02)
+    rec = recordings([0, 0, 0, 0, 1, 1, 0, 0, 0, 1, 0, 0, 0, 0])
+    scores = np.arange(14, dtype=float)
+    labels, best, _ = task.event_units(rec, scores)
+    assert [1, 1, 0, 0, 0, 0, 0, 0] == labels.tolist()
+    assert [5.0, 9.0, 1.0, 3.0, 7.0, 8.0, 11.0, 13.0] == best.tolist()
+
+
+def test_trial_table_counts_early_fires_detections_and_latency() -> None:
+    """Firing before the onset is a false positive; latency runs from the onset (ms)."""
+    task = StreamDetection(stream="s", label="slip_onset_s")
+    rec = recordings([0] * 10 + [1] * 10)
+    pred = np.zeros(20, dtype=bool)
+    pred[[3, 13]] = True
+    row = task._trial_table(rec, pred).iloc[0]
+    assert bool(row["fired_before"])
+    assert bool(row["detected"])
+    assert 30.0 == pytest.approx(row["latency_ms"])
+    assert -20.0 == pytest.approx(row["vs_reference_ms"])
+
+
+def test_missing_stream_and_channel_are_named() -> None:
+    """A stream or channel the dataset lacks is a SlipkitError naming it."""
+    ds = make_dataset(n_trials=2, n_frames=50)
+    task = StreamDetection(stream="force", channels=["fx", "nope"])
+    with pytest.raises(SlipkitError, match="nope"):
+        task.recordings(ds, "force", ["fx", "nope"])
+    with pytest.raises(SlipkitError, match="pac"):
+        task.recordings(ds, "pac", None)
+
+
+def test_truth_column_labels_are_looked_up_across_rates() -> None:
+    """Labels from a 300 Hz truth column land on the 2.2 kHz pac samples by time."""
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        cfg = compose(config_name="simulate", overrides=["scene=biotac_lift_slip"])
+    ds = build_scene(cfg.scene).simulate(1, seed=1)
+    task = StreamDetection(
+        stream="pac", truth_stream="truth_force", truth_column="ft", label=None
+    )
+    rec = task.recordings(ds, "pac", ["pac"])
+    ft = next(iter(ds)).streams["truth_force"]
+    expected = ft["t"].to_numpy()[np.argmax(ft["ft"].to_numpy() > 0)]
+    assert expected == pytest.approx(rec.t[np.argmax(rec.y)], abs=1 / 300)
+
+
+def compose_train(*overrides: str) -> object:
+    """The train config with overrides."""
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        return compose(config_name="train", overrides=list(overrides))
+
+
+def test_fsr_roc_trains_and_evaluates(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """fsr_roc end to end: run folder with ROC plot; evaluate scores an unseen dataset."""
+    run = tmp_path / "run"
+    cfg = compose_train("experiment=fsr_roc", "dataset.n_trials=4", f"run_dir={run}")
+    train_main(cfg)  # type: ignore[arg-type]
+    printed = capsys.readouterr().out
+    assert "paper 8" in printed
+    assert (run / "roc.png").stat().st_size > 0
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert "event ROC (Youden)" == metrics["threshold_from"]
+    assert 0 == metrics["test"]["disturbances"]["fired"]
+    from slipkit.train.runs import read_run
+
+    assert metrics["threshold"] == read_run(run).model.threshold_
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        scfg = compose(config_name="simulate", overrides=["scene=fsr_probe_slide"])
+    folder = save_dataset(build_scene(scfg.scene).simulate(2, seed=11), tmp_path / "ds")
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        ecfg = compose(
+            config_name="evaluate",
+            overrides=[f"run={run}", f"dataset={folder}", "name=unseen"],
+        )
+    out = evaluate_main(ecfg)
+    ev = json.loads(out.read_text())
+    assert 2 == ev["dataset"]["n_trials"]
+    assert ev["test"]["events"]["n_events"] > 0
+
+
+def test_biotac_slip_detect_reports_both_detectors(tmp_path: Path) -> None:
+    """biotac_slip_detect: pressure leads the IMU onset and the force derivative lags it."""
+    run = tmp_path / "run"
+    cfg = compose_train(
+        "experiment=biotac_slip_detect", "dataset.n_trials=4", f"run_dir={run}"
+    )
+    train_main(cfg)  # type: ignore[arg-type]
+    m = json.loads((run / "metrics.json").read_text())
+    fd = m["detectors"]["force_derivative"]
+    assert "ForceDerivative" == fd["estimator"]
+    assert m["test"]["vs_reference_ms"]["all"]["mean"] < 0
+    assert fd["test"]["vs_reference_ms"]["all"]["mean"] > 0
+
+
+def test_compare_entry_without_fixed_threshold_is_skipped_in_evaluate(
+    tmp_path: Path,
+) -> None:
+    """A compare detector with a ROC-chosen threshold cannot be re-scored by evaluate."""
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        cfg = compose(config_name="simulate", overrides=["scene=biotac_lift_slip"])
+    ds = build_scene(cfg.scene).simulate(4, seed=2)
+    task = StreamDetection(
+        stream="truth_force",
+        channels=["fx", "fy"],
+        compare=[
+            {
+                "name": "free",
+                "detector": ForceDerivative(threshold=None),
+                "stream": "truth_force",
+                "channels": ["fx", "fy"],
+            }
+        ],
+    )
+    result = task.fit(ForceDerivative(), ds, seed=0, out=tmp_path)
+    assert "sample ROC" == result.metrics["detectors"]["free"]["threshold_from"]
+    metrics = task.evaluate(result.model, ds, out=tmp_path)
+    assert "skipped" in metrics["detectors"]["free"]
