@@ -1,0 +1,834 @@
+"""SlipTack: speed from the stick-slip frequency, acceleration from the nib deflection.
+
+Follows the SlipTack paper (seed 000, ``docs/baselines/sliptack.md``):
+
+* **dominant frequency** (Sec. IV-C, eqs. 6-7) -- :func:`dominant_frequency`: subtract a
+  300-frame moving average, Hamming window, DFT (``numpy.fft.rfft``); the spectrum's local
+  maxima (``scipy.signal.find_peaks``) at or below ``f_max`` are sorted by amplitude
+  (``p(k, f_max)``, k = 1 the largest); ``f_i(f_max)`` is the mean over j = 1..10 of the
+  mean frequency of the top j peaks (eq. 6, whose inner bound ``i`` we read as ``j``), and
+  ``f_d`` the mean of ``f_i`` over ``f_max`` = 15, 16, ..., 40 Hz (26 values, eq. 7);
+* **speed** -- :func:`speed_from_frequency` inverts ``f = 1 / (tau_stick + tau_slip)``
+  (eq. 3) in the ``exact`` form (the integrated oscillator's period,
+  :mod:`slipkit.physics.stick_slip`) or the paper's form (``tau_stick = mu_s Fn / (k_l
+  v0)``, ``tau_slip = pi / w0``); the speed is undefined (NaN) at and above the
+  saturation frequency; :class:`StickSlipSpeed` runs it over a sliding window;
+* **acceleration** -- :class:`DropAcceleration`: eq. 4 (``a = g - mu_k k_a (x - x0) /
+  m_t``, calibrated by linear regression on the gross deflection, feature
+  ``"deflection"``) or eq. 5 (the slope of the frequency-derived speed, feature
+  ``"frequency_slope"``);
+* **torsional slip** -- :class:`TorsionalSlipDetector`: RMS of the ~10 Hz band
+  (Sec. IV-F, "effective frequency response ~10 Hz"), a :class:`StreamDetector`.
+
+Every estimator has a batch form over whole recordings (``segments`` marks where one
+ends) and a streaming form (``stream().update(sample)``) over a ring buffer of the last
+``window`` samples; tests require both to agree. NaN policy: a value that cannot be
+computed (warm-up, a flat window with no spectral peak, a frequency at or above
+saturation, a NaN sample in the window) is NaN, never ``inf`` and never an exception.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Sequence
+from numbers import Integral, Real
+from typing import Any, ClassVar, Literal
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+from numpy.typing import ArrayLike, NDArray
+from scipy.ndimage import uniform_filter1d
+from scipy.optimize import minimize_scalar
+from scipy.signal import butter, find_peaks, sosfilt
+from sklearn.base import BaseEstimator, RegressorMixin
+from sklearn.linear_model import LinearRegression
+from sklearn.utils._param_validation import Interval, StrOptions
+from sklearn.utils.validation import check_is_fitted, validate_data
+
+from slipkit.baselines.base import DetectorStream, StreamDetector, segment_bounds
+from slipkit.physics.stick_slip import (
+    natural_frequency,
+    saturation_frequency,
+    slip_half_amplitude,
+)
+
+FloatArray = NDArray[np.float64]
+Form = Literal["exact", "paper"]
+
+#: The paper's f_max range for eq. 7 (Hz).
+PAPER_F_MAX = (15.0, 40.0)
+
+
+# -- eqs. 6-7: dominant frequency of one window ------------------------------------------
+def f_max_values(f_max_range: Sequence[float], step: float = 1.0) -> FloatArray:
+    """The ``f_max`` values eq. 7 averages over (Hz): ``lo, lo + step, ..., hi``."""
+    lo, hi = float(f_max_range[0]), float(f_max_range[1])
+    if not 0.0 < lo <= hi or step <= 0:
+        raise ValueError(
+            f"f_max_range must be 0 < lo <= hi and step > 0; got {f_max_range}, {step}"
+        )
+    return np.arange(lo, hi + 1e-9 * step, step)
+
+
+def dominant_frequency(
+    x: ArrayLike,
+    rate_hz: float,
+    *,
+    detrend_frames: int = 300,
+    n_peaks: int = 10,
+    f_max_range: Sequence[float] = PAPER_F_MAX,
+    f_max_step: float = 1.0,
+    pad_factor: int = 1,
+    min_peak_ratio: float = 0.0,
+) -> float:
+    """Dominant stick-slip frequency ``f_d`` of one signal window (Hz), eqs. 6-7.
+
+    Parameters
+    ----------
+    x : array_like (n,)
+        The nib signal (any unit), in time order.
+    rate_hz : float
+        Sample rate (Hz).
+    detrend_frames : int
+        Length of the centred moving average subtracted first (frames; the paper: 300;
+        clipped to ``n``). It removes the gross displacement.
+    n_peaks : int
+        Top peaks averaged by eq. 6 (the paper: 10).
+    f_max_range : (float, float)
+        Range of the spectrum limit ``f_max`` averaged by eq. 7 (Hz; the paper: 15-40).
+    f_max_step : float
+        Step of ``f_max`` (Hz; the paper: 1, giving 26 values).
+    pad_factor : int
+        Zero-padding of the DFT (1: none); finer frequency grid, same resolution.
+    min_peak_ratio : float
+        Peaks below this fraction of the largest spectral magnitude (DC excluded) are
+        not counted (0: every local maximum, the paper's text). A slipkit addition: on a
+        clean stick-slip signal the paper's top-10 average is dominated by noise peaks.
+
+    Returns
+    -------
+    float
+        ``f_d`` in Hz; NaN when the window is shorter than 4 samples, holds a NaN, is
+        flat after detrending, or has no spectral peak at or below the largest ``f_max``.
+        An ``f_max`` with no peak below it is left out of eq. 7's mean.
+    """
+    xv = np.asarray(x, dtype=np.float64).reshape(-1)
+    n = len(xv)
+    if n < 4 or not np.isfinite(xv).all():
+        return float("nan")
+    trend = uniform_filter1d(xv, size=min(int(detrend_frames), n), mode="nearest")
+    resid = xv - trend
+    # A flat window: round-off in the moving average leaves ~1e-16 ripples whose
+    # "peaks" are meaningless.
+    if np.max(np.abs(resid)) <= 1e-12 * max(1.0, float(np.max(np.abs(xv)))):
+        return float("nan")
+    nfft = n * int(pad_factor)
+    mag = np.abs(np.fft.rfft(resid * np.hamming(n), nfft))
+    freqs = np.fft.rfftfreq(nfft, 1.0 / float(rate_hz))
+    fmax = f_max_values(f_max_range, f_max_step)
+    peaks, _ = find_peaks(mag)
+    keep = (freqs[peaks] <= fmax[-1]) & (
+        mag[peaks] >= float(min_peak_ratio) * float(np.max(mag[1:]))
+    )
+    peaks = peaks[keep]
+    if len(peaks) == 0:
+        return float("nan")
+    # p(k, .): peaks by amplitude, largest first (ties: lower frequency first).
+    order = peaks[np.lexsort((freqs[peaks], -mag[peaks]))]
+    pf = freqs[order]
+    ranks = np.arange(1, n_peaks + 1)
+    f_i = np.full(len(fmax), np.nan)
+    for m, limit in enumerate(fmax):
+        p = pf[pf <= limit][:n_peaks]
+        if len(p) == 0:
+            continue
+        top_j = np.cumsum(p) / np.arange(1, len(p) + 1)  # mean of the top j peaks
+        # Fewer than n_peaks peaks: the top-j mean for j beyond them is the mean of all.
+        f_i[m] = float(np.mean(top_j[np.minimum(ranks, len(p)) - 1]))
+    return float(np.nanmean(f_i)) if np.isfinite(f_i).any() else float("nan")
+
+
+# -- eq. 3 inverted ------------------------------------------------------------------------
+def _invert(f_hz: FloatArray, length_m: float, w0: float, form: str) -> FloatArray:
+    """Speed (m/s) from frequency with the stick length ``length_m`` (d or mu_s Fn / k_l)."""
+    f = np.asarray(f_hz, dtype=np.float64)
+    out = np.full(f.shape, np.nan)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        period = 1.0 / f
+    if form == "paper":
+        # 1/f = c / v + pi / w0  ->  v = c / (1/f - pi/w0), needs f < w0 / pi.
+        rest = period - np.pi / w0
+        ok = np.isfinite(f) & (f > 0) & (rest > 0)
+        out[ok] = length_m / rest[ok]
+        return out
+    # exact: with theta = atan(v / (w0 d)) the period is w0 T = 2 cot(theta) + pi + 2 theta
+    # (d cancels). With e = pi/2 - theta: 2 (tan e - e) = w0 T - 2 pi =: r > 0 below
+    # saturation, tan e - e increasing on (0, pi/2). Solved by vectorised bisection
+    # (hand-written: the same float operations for one value or many, so the streaming
+    # and batch forms agree exactly; 80 halvings reach double precision).
+    r = w0 * period - 2.0 * np.pi
+    ok = np.isfinite(f) & (f > 0) & (r > 0)
+    if not ok.any():
+        return out
+    target = 0.5 * r[ok]
+    lo = np.zeros_like(target)
+    hi = np.full_like(target, 0.5 * np.pi)
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        above = np.tan(mid) - mid > target
+        hi = np.where(above, mid, hi)
+        lo = np.where(above, lo, mid)
+    e = 0.5 * (lo + hi)
+    with np.errstate(divide="ignore"):
+        v = w0 * length_m / np.tan(e)
+    out[ok] = np.where(np.isfinite(v) & (e > 0), v, np.nan)
+    return out
+
+
+def speed_from_frequency(
+    f_hz: ArrayLike,
+    *,
+    normal_force_N: float,
+    mu_s: float,
+    mu_k: float,
+    M_kg: float,
+    k_l_N_m: float,
+    form: Form = "exact",
+) -> FloatArray:
+    """Pull speed ``v0`` (m/s) whose stick-slip frequency is ``f_hz`` (eq. 3 inverted).
+
+    ``form="exact"`` inverts ``1 / f = 2 d / v0 + (pi + 2 atan(v0 / (w0 d))) / w0``
+    (``d = (mu_s - mu_k) Fn / k_l``, the integrated oscillator's period);
+    ``form="paper"`` inverts ``1 / f = mu_s Fn / (k_l v0) + pi / w0``. The period falls
+    monotonically with ``v0`` towards ``tau_slip`` at infinite speed, so the inverse is
+    unique below the saturation frequency (:func:`~slipkit.physics.stick_slip.
+    saturation_frequency`: ``w0 / (2 pi)`` exact, ``w0 / pi`` paper) and undefined at or
+    above it. Returns NaN there, and for ``f <= 0`` or non-finite ``f``; close below
+    saturation the speed grows without bound (``v0 ~ w0 d / (1.5 (w0 / f - 2 pi))^(1/3)``
+    exact) and is ill-conditioned.
+    """
+    if form not in ("exact", "paper"):
+        raise ValueError(f"form must be 'exact' or 'paper'; got {form!r}")
+    w0 = float(natural_frequency(M_kg, k_l_N_m))
+    length = (
+        float(slip_half_amplitude(normal_force_N, mu_s, mu_k, k_l_N_m))
+        if form == "exact"
+        else mu_s * normal_force_N / k_l_N_m
+    )
+    f = np.asarray(f_hz, dtype=np.float64)
+    return _invert(np.atleast_1d(f), length, w0, form).reshape(f.shape)
+
+
+def _period(v: FloatArray, length_m: float, w0: float, form: str) -> FloatArray:
+    """Stick-slip period (s) at speed ``v`` (m/s): eq. 3's ``tau_stick + tau_slip``."""
+    if form == "paper":
+        return length_m / v + np.pi / w0
+    return 2.0 * length_m / v + (np.pi + 2.0 * np.arctan2(v, w0 * length_m)) / w0
+
+
+# -- sliding windows ------------------------------------------------------------------------
+class _FrequencyTrack:
+    """Ring buffer of the last ``window`` samples; a new ``f_d`` every ``hop`` samples."""
+
+    def __init__(self, est: StickSlipSpeed) -> None:
+        self.est = est
+        self.buf: deque[float] = deque(maxlen=int(est.window))
+        self.n = 0
+        self.f = float("nan")
+
+    def reset(self) -> None:
+        self.buf.clear()
+        self.n = 0
+        self.f = float("nan")
+
+    def update(self, value: float) -> tuple[float, bool]:
+        """Append one sample; return (current f_d in Hz, whether it was just recomputed)."""
+        self.buf.append(float(value))
+        self.n += 1
+        w, h = int(self.est.window), int(self.est.hop)
+        if self.n >= w and (self.n - w) % h == 0:
+            self.f = self.est._window_frequency(np.fromiter(self.buf, np.float64, w))
+            return self.f, True
+        return self.f, False
+
+
+class StickSlipSpeed(RegressorMixin, BaseEstimator):
+    """Object speed from the nib's stick-slip frequency (SlipTack eqs. 3, 6, 7).
+
+    Every ``hop`` samples, eqs. 6-7 (:func:`dominant_frequency`) give ``f_d`` over the last
+    ``window`` samples; eq. 3 inverted (:func:`speed_from_frequency`, ``form``) turns it into
+    a speed, held until the next estimate. ``fit`` only calibrates: with
+    ``calibrate=False`` it keeps the physical stick length from the parameters; with
+    ``calibrate=True`` it fits the one unknown of eq. 3 (the stick length ``d`` for
+    ``exact``, ``mu_s Fn / k_l`` for ``paper``) to the training samples by least squares on
+    the period.
+
+    Parameters
+    ----------
+    rate_hz : float
+        Nib stream rate (Hz).
+    window : int
+        Samples per spectrum (frames); the frequency resolution is ``rate_hz / window``.
+    hop : int
+        Samples between estimates (frames).
+    detrend_frames, n_peaks, f_max_range, f_max_step, pad_factor, min_peak_ratio
+        As in :func:`dominant_frequency` (the paper: 300, 10, (15, 40) Hz, 1 Hz, 1, 0).
+    form : {"exact", "paper"}
+        Which frequency-speed law is inverted.
+    normal_force_N : float
+        Normal load per nib (N).
+    mu_s, mu_k : float
+        Static and kinetic friction of the object on the skin.
+    M_kg, k_l_N_m : float
+        Nib mass (kg) and lateral stiffness (N/m); the paper's 1.4e-5 kg and 9.45 N/m.
+    calibrate : bool
+        Fit the stick length on the training samples (else use the physics).
+
+    Attributes
+    ----------
+    stick_length_m_ : float
+        ``d = (mu_s - mu_k) Fn / k_l`` (exact) or ``mu_s Fn / k_l`` (paper), in m.
+    w0_ : float
+        Nib natural angular frequency (rad/s).
+    saturation_hz_ : float
+        Frequency at and above which the speed is undefined (Hz).
+    n_features_in_ : int
+        Channels seen in ``fit`` (1).
+    """
+
+    _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
+        "rate_hz": [Interval(Real, 0, None, closed="neither")],
+        "window": [Interval(Integral, 4, None, closed="left")],
+        "hop": [Interval(Integral, 1, None, closed="left")],
+        "detrend_frames": [Interval(Integral, 1, None, closed="left")],
+        "n_peaks": [Interval(Integral, 1, None, closed="left")],
+        "f_max_range": ["array-like"],
+        "f_max_step": [Interval(Real, 0, None, closed="neither")],
+        "pad_factor": [Interval(Integral, 1, None, closed="left")],
+        "min_peak_ratio": [Interval(Real, 0, 1, closed="both")],
+        "form": [StrOptions({"exact", "paper"})],
+        "normal_force_N": [Interval(Real, 0, None, closed="neither")],
+        "mu_s": [Interval(Real, 0, None, closed="neither")],
+        "mu_k": [Interval(Real, 0, None, closed="neither")],
+        "M_kg": [Interval(Real, 0, None, closed="neither")],
+        "k_l_N_m": [Interval(Real, 0, None, closed="neither")],
+        "calibrate": ["boolean"],
+    }
+
+    def __init__(
+        self,
+        *,
+        rate_hz: float = 1000.0,
+        window: int = 1000,
+        hop: int = 10,
+        detrend_frames: int = 300,
+        n_peaks: int = 10,
+        f_max_range: Sequence[float] = PAPER_F_MAX,
+        f_max_step: float = 1.0,
+        pad_factor: int = 1,
+        min_peak_ratio: float = 0.0,
+        form: str = "exact",
+        normal_force_N: float = 0.05,
+        mu_s: float = 0.55,
+        mu_k: float = 0.45,
+        M_kg: float = 1.4e-5,
+        k_l_N_m: float = 9.45,
+        calibrate: bool = False,
+    ) -> None:
+        self.rate_hz = rate_hz
+        self.window = window
+        self.hop = hop
+        self.detrend_frames = detrend_frames
+        self.n_peaks = n_peaks
+        self.f_max_range = f_max_range
+        self.f_max_step = f_max_step
+        self.pad_factor = pad_factor
+        self.min_peak_ratio = min_peak_ratio
+        self.form = form
+        self.normal_force_N = normal_force_N
+        self.mu_s = mu_s
+        self.mu_k = mu_k
+        self.M_kg = M_kg
+        self.k_l_N_m = k_l_N_m
+        self.calibrate = calibrate
+
+    # -- pieces --------------------------------------------------------------------
+    def _window_frequency(self, x: FloatArray) -> float:
+        return dominant_frequency(
+            x,
+            self.rate_hz,
+            detrend_frames=self.detrend_frames,
+            n_peaks=self.n_peaks,
+            f_max_range=tuple(self.f_max_range),
+            f_max_step=self.f_max_step,
+            pad_factor=self.pad_factor,
+            min_peak_ratio=self.min_peak_ratio,
+        )
+
+    def segment_frequency(self, x: ArrayLike) -> float:
+        """``f_d`` of one whole signal segment (Hz), e.g. one steady pull (the paper)."""
+        return self._window_frequency(np.asarray(x, dtype=np.float64).reshape(-1))
+
+    def _recording_frequency(self, x: FloatArray) -> FloatArray:
+        """``f_d`` per sample of one recording (NaN in the warm-up), held between hops."""
+        n, w, h = len(x), int(self.window), int(self.hop)
+        out = np.full(n, np.nan)
+        if n < w:
+            return out
+        ends = np.arange(w - 1, n, h)  # sample index at which each estimate is made
+        views = sliding_window_view(x, w)[ends - (w - 1)]
+        vals = np.array(
+            [self._window_frequency(np.ascontiguousarray(v)) for v in views]
+        )
+        idx = np.searchsorted(ends, np.arange(n), side="right") - 1
+        have = idx >= 0
+        out[have] = vals[idx[have]]
+        return out
+
+    def _check(self, X: ArrayLike, *, reset: bool) -> FloatArray:
+        Xv = np.asarray(
+            validate_data(
+                self, X, reset=reset, dtype=np.float64, ensure_all_finite=False
+            )
+        )
+        if Xv.shape[1] != 1:
+            raise ValueError(
+                f"{type(self).__name__} reads 1 channel (the nib signal); X has "
+                f"{Xv.shape[1]}"
+            )
+        return Xv
+
+    def _physics_length(self) -> float:
+        if self.form == "exact":
+            return float(
+                slip_half_amplitude(
+                    self.normal_force_N, self.mu_s, self.mu_k, self.k_l_N_m
+                )
+            )
+        return self.mu_s * self.normal_force_N / self.k_l_N_m
+
+    # -- sklearn -------------------------------------------------------------------
+    def fit(
+        self, X: ArrayLike, y: ArrayLike, *, segments: ArrayLike | None = None
+    ) -> StickSlipSpeed:
+        """Calibrate on recordings ``X`` (n_samples, 1) with true speeds ``y`` (mm/s).
+
+        Samples with NaN ``y`` (or ``y <= 0``) are ignored by the calibration.
+        """
+        self._validate_params()
+        if self.mu_k >= self.mu_s:
+            raise ValueError(
+                f"need mu_k < mu_s; got mu_s={self.mu_s}, mu_k={self.mu_k}"
+            )
+        Xv = self._check(X, reset=True)
+        yv = np.asarray(y, dtype=np.float64).reshape(-1)
+        if yv.shape != (len(Xv),):
+            raise ValueError(f"y must have shape ({len(Xv)},); got {yv.shape}")
+        f_max_values(self.f_max_range, self.f_max_step)  # checks the range
+        self.w0_ = float(natural_frequency(self.M_kg, self.k_l_N_m))
+        self.saturation_hz_ = float(
+            saturation_frequency(self.M_kg, self.k_l_N_m, form=self.form)  # type: ignore[arg-type]
+        )
+        self.stick_length_m_ = self._physics_length()
+        if self.calibrate:
+            f = self._frequencies(Xv, segments)
+            ok = np.isfinite(f) & (f > 0) & np.isfinite(yv) & (yv > 0)
+            if not ok.any():
+                raise ValueError(
+                    "calibrate=True needs samples with a frequency estimate and a "
+                    "positive true speed; none found (recordings shorter than window?)"
+                )
+            period, v = 1.0 / f[ok], yv[ok] * 1e-3
+
+            def loss(log_len: float) -> float:
+                resid = period - _period(v, float(np.exp(log_len)), self.w0_, self.form)
+                return float(np.mean(resid * resid))
+
+            ref = np.log(self.stick_length_m_)
+            res = minimize_scalar(
+                loss,
+                bounds=(ref - 6.0, ref + 6.0),
+                method="bounded",
+                options={"xatol": 1e-10},
+            )
+            self.stick_length_m_ = float(np.exp(res.x))
+        return self
+
+    def _frequencies(self, Xv: FloatArray, segments: ArrayLike | None) -> FloatArray:
+        out = np.empty(len(Xv))
+        for a, b in segment_bounds(len(Xv), segments):
+            out[a:b] = self._recording_frequency(Xv[a:b, 0])
+        return out
+
+    def frequency(
+        self, X: ArrayLike, *, segments: ArrayLike | None = None
+    ) -> FloatArray:
+        """Dominant frequency ``f_d`` per sample (Hz; NaN in the warm-up)."""
+        check_is_fitted(self, "stick_length_m_")
+        return self._frequencies(self._check(X, reset=False), segments)
+
+    def speed_from_frequency(self, f_hz: ArrayLike) -> FloatArray:
+        """Eq. 3 inverted with the fitted stick length: speed (mm/s), NaN at saturation."""
+        check_is_fitted(self, "stick_length_m_")
+        f = np.atleast_1d(np.asarray(f_hz, dtype=np.float64))
+        return 1e3 * _invert(f, self.stick_length_m_, self.w0_, self.form)
+
+    def frequency_from_speed(self, v_mm_s: ArrayLike) -> FloatArray:
+        """Eq. 3 with the fitted stick length: frequency (Hz) at speed ``v`` (mm/s)."""
+        check_is_fitted(self, "stick_length_m_")
+        v = 1e-3 * np.asarray(v_mm_s, dtype=np.float64)
+        with np.errstate(divide="ignore"):
+            return 1.0 / _period(v, self.stick_length_m_, self.w0_, self.form)
+
+    def predict(self, X: ArrayLike, *, segments: ArrayLike | None = None) -> FloatArray:
+        """Speed per sample (mm/s); NaN in the warm-up, without a peak, or at saturation."""
+        return self.speed_from_frequency(self.frequency(X, segments=segments))
+
+    def stream(self) -> SpeedStream:
+        """The sample-by-sample form: ``update(sample) -> (f_d Hz, speed mm/s)``."""
+        check_is_fitted(self, "stick_length_m_")
+        return SpeedStream(self)
+
+    def __sklearn_tags__(self) -> Any:
+        tags = super().__sklearn_tags__()
+        tags.input_tags.allow_nan = True
+        return tags
+
+
+class SpeedStream:
+    """Streaming :class:`StickSlipSpeed`: O(window) work every ``hop`` samples, O(1) else."""
+
+    def __init__(self, est: StickSlipSpeed) -> None:
+        self.est = est
+        self.track = _FrequencyTrack(est)
+        self.speed = float("nan")
+
+    def reset(self) -> None:
+        """Forget all state (a new recording starts)."""
+        self.track.reset()
+        self.speed = float("nan")
+
+    def update(self, sample: ArrayLike) -> tuple[float, float]:
+        """Feed one sample (1,) or scalar; return (frequency Hz, speed mm/s) now."""
+        x = float(np.asarray(sample, dtype=np.float64).reshape(-1)[0])
+        f, new = self.track.update(x)
+        if new:  # invert only when a new estimate was made (every hop samples)
+            self.speed = float(self.est.speed_from_frequency(f)[0])
+        return f, self.speed
+
+
+# -- acceleration: eqs. 4 and 5 -----------------------------------------------------------
+def _trailing_mean(x: FloatArray, k: int) -> FloatArray:
+    """Mean of the last ``k`` samples (NaN before ``k`` samples exist)."""
+    out = np.full(len(x), np.nan)
+    if len(x) >= k:
+        out[k - 1 :] = sliding_window_view(x, k).mean(axis=1)
+    return out
+
+
+def _slope(v: FloatArray, rate_hz: float) -> float:
+    """Least-squares slope of ``v`` against time at ``rate_hz`` (units of v per s)."""
+    t = (np.arange(len(v)) - 0.5 * (len(v) - 1)) / rate_hz
+    return float(np.dot(t, v - v.mean()) / np.dot(t, t))
+
+
+class DropAcceleration(RegressorMixin, BaseEstimator):
+    """Acceleration of a sliding object from the nib signal (SlipTack eqs. 4 and 5).
+
+    ``feature="deflection"`` (eq. 4, the paper's G): the gross deflection ``x - x0`` is
+    the trailing mean of the nib signal over ``smooth_frames`` (mm; the mean removes the
+    stick-slip ripple) and ``a = g - mu_k k_a (x - x0) / m_t`` is a line in it, fitted by
+    linear regression (``fit``: intercept ~ ``g``, slope ~ ``-mu_k k_a / m_t``).
+    ``feature="frequency_slope"`` (eq. 5, the paper's SF): the speed from
+    :class:`StickSlipSpeed` (``speed`` parameters) and its least-squares slope over the
+    last ``slope_frames`` samples (m/s^2), mapped to ``a`` by the same regression (the
+    identity when eq. 5 holds).
+
+    Parameters
+    ----------
+    feature : {"deflection", "frequency_slope"}
+        Which signal feature eq. 4 / eq. 5 reads.
+    rate_hz : float
+        Nib stream rate (Hz).
+    smooth_frames : int
+        Trailing mean length for the gross deflection (frames).
+    slope_frames : int
+        Speed samples the frequency slope is fitted over (frames).
+    speed : mapping, optional
+        Parameters of the :class:`StickSlipSpeed` used by ``frequency_slope``.
+
+    Attributes
+    ----------
+    coef_ : float
+        Regression slope (m/s^2 per mm for ``deflection``; 1 per unit for the slope).
+    intercept_ : float
+        Regression intercept (m/s^2); ~ ``g`` for ``deflection``.
+    r_ : float
+        Pearson correlation of the feature with the true acceleration in ``fit``.
+    speed_ : StickSlipSpeed or None
+        The fitted speed estimator (``frequency_slope`` only).
+    n_features_in_ : int
+        Channels seen in ``fit`` (1).
+    """
+
+    _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
+        "feature": [StrOptions({"deflection", "frequency_slope"})],
+        "rate_hz": [Interval(Real, 0, None, closed="neither")],
+        "smooth_frames": [Interval(Integral, 1, None, closed="left")],
+        "slope_frames": [Interval(Integral, 2, None, closed="left")],
+        "speed": [dict, None],
+    }
+
+    def __init__(
+        self,
+        *,
+        feature: str = "deflection",
+        rate_hz: float = 1000.0,
+        smooth_frames: int = 30,
+        slope_frames: int = 50,
+        speed: dict[str, Any] | None = None,
+    ) -> None:
+        self.feature = feature
+        self.rate_hz = rate_hz
+        self.smooth_frames = smooth_frames
+        self.slope_frames = slope_frames
+        self.speed = speed
+
+    def _speed_estimator(self) -> StickSlipSpeed:
+        params = {
+            "rate_hz": self.rate_hz,
+            "window": 200,
+            "hop": 10,
+            **(self.speed or {}),
+        }
+        return StickSlipSpeed(**params)
+
+    def _recording_feature(self, x: FloatArray) -> FloatArray:
+        if self.feature == "deflection":
+            return _trailing_mean(x, int(self.smooth_frames))
+        assert self.speed_ is not None
+        v = self.speed_.predict(x[:, None]) * 1e-3  # m/s
+        k = int(self.slope_frames)
+        out = np.full(len(x), np.nan)
+        if len(x) >= k:
+            out[k - 1 :] = [_slope(w, self.rate_hz) for w in sliding_window_view(v, k)]
+        return out
+
+    def _features(self, Xv: FloatArray, segments: ArrayLike | None) -> FloatArray:
+        out = np.empty(len(Xv))
+        for a, b in segment_bounds(len(Xv), segments):
+            out[a:b] = self._recording_feature(Xv[a:b, 0])
+        return out
+
+    def _check(self, X: ArrayLike, *, reset: bool) -> FloatArray:
+        Xv = np.asarray(
+            validate_data(
+                self, X, reset=reset, dtype=np.float64, ensure_all_finite=False
+            )
+        )
+        if Xv.shape[1] != 1:
+            raise ValueError(
+                f"DropAcceleration reads 1 channel (the nib signal); X has {Xv.shape[1]}"
+            )
+        return Xv
+
+    def fit(
+        self, X: ArrayLike, y: ArrayLike, *, segments: ArrayLike | None = None
+    ) -> DropAcceleration:
+        """Calibrate the line ``a = intercept_ + coef_ * feature`` on true ``y`` (m/s^2).
+
+        Samples with NaN ``y`` (outside the paper's window) or NaN feature are ignored.
+        """
+        self._validate_params()
+        Xv = self._check(X, reset=True)
+        yv = np.asarray(y, dtype=np.float64).reshape(-1)
+        if yv.shape != (len(Xv),):
+            raise ValueError(f"y must have shape ({len(Xv)},); got {yv.shape}")
+        self.speed_: StickSlipSpeed | None = None
+        if self.feature == "frequency_slope":
+            # The speed law needs no calibration data: eq. 3 with the given physics.
+            self.speed_ = self._speed_estimator().fit(
+                np.zeros((1, 1)), np.full(1, np.nan)
+            )
+        feat = self._features(Xv, segments)
+        ok = np.isfinite(feat) & np.isfinite(yv)
+        if ok.sum() < 2 or np.ptp(feat[ok]) == 0:
+            raise ValueError(
+                f"DropAcceleration({self.feature}): fewer than 2 distinct feature values "
+                "with a true acceleration; cannot fit the calibration line"
+            )
+        reg = LinearRegression().fit(feat[ok, None], yv[ok])
+        self.coef_ = float(reg.coef_[0])
+        self.intercept_ = float(reg.intercept_)
+        self.r_ = float(np.corrcoef(feat[ok], yv[ok])[0, 1])
+        return self
+
+    def transform_feature(
+        self, X: ArrayLike, *, segments: ArrayLike | None = None
+    ) -> FloatArray:
+        """The feature per sample (mm, or m/s^2 for the slope; NaN in the warm-up)."""
+        check_is_fitted(self, "coef_")
+        return self._features(self._check(X, reset=False), segments)
+
+    def predict(self, X: ArrayLike, *, segments: ArrayLike | None = None) -> FloatArray:
+        """Acceleration per sample (m/s^2, downward positive; NaN in the warm-up)."""
+        return self.intercept_ + self.coef_ * self.transform_feature(
+            X, segments=segments
+        )
+
+    def stream(self) -> AccelerationStream:
+        """The sample-by-sample form: ``update(sample) -> acceleration`` (m/s^2)."""
+        check_is_fitted(self, "coef_")
+        return AccelerationStream(self)
+
+    def __sklearn_tags__(self) -> Any:
+        tags = super().__sklearn_tags__()
+        tags.input_tags.allow_nan = True
+        return tags
+
+
+class AccelerationStream:
+    """Streaming :class:`DropAcceleration` over ring buffers (O(window) per sample)."""
+
+    def __init__(self, est: DropAcceleration) -> None:
+        self.est = est
+        k = int(est.smooth_frames if est.feature == "deflection" else est.slope_frames)
+        self.buf: deque[float] = deque(maxlen=k)
+        self.speed = est.speed_.stream() if est.speed_ is not None else None
+
+    def reset(self) -> None:
+        """Forget all state (a new recording starts)."""
+        self.buf.clear()
+        if self.speed is not None:
+            self.speed.reset()
+
+    def update(self, sample: ArrayLike) -> float:
+        """Feed one nib sample; return the acceleration estimate (m/s^2) or NaN."""
+        x = float(np.asarray(sample, dtype=np.float64).reshape(-1)[0])
+        if self.speed is None:
+            self.buf.append(x)
+        else:
+            self.buf.append(self.speed.update(x)[1] * 1e-3)
+        k = self.buf.maxlen or 1
+        if len(self.buf) < k:
+            return float("nan")
+        w = np.fromiter(self.buf, np.float64, k)
+        feat = (
+            float(sliding_window_view(w, k).mean(axis=1)[0])
+            if self.speed is None
+            else _slope(w, self.est.rate_hz)
+        )
+        return self.est.intercept_ + self.est.coef_ * feat
+
+
+# -- torsional slip: the ~10 Hz band ----------------------------------------------------------
+class TorsionalSlipDetector(StreamDetector):
+    """Torsional slip flag: RMS of the nib signal in the ~10 Hz band (SlipTack Sec. IV-F).
+
+    The paper detects torsional slip from the sensor's "effective frequency response
+    ~10 Hz" without giving the rule; slipkit band-passes the signal (Butterworth,
+    ``scipy.signal``, second-order sections, causal) and scores each sample by the RMS of
+    the band over the last ``window`` samples (signal unit, e.g. mm). The threshold comes
+    from the ROC (``threshold=None``) or is fixed.
+
+    Parameters
+    ----------
+    rate_hz : float
+        Stream rate (Hz).
+    band_hz : (float, float)
+        Pass band (Hz).
+    order : int
+        Butterworth order (per band edge).
+    window : int
+        RMS window (frames).
+    threshold, roc_point
+        As in :class:`~slipkit.baselines.base.StreamDetector`.
+
+    Attributes
+    ----------
+    threshold_, classes_, roc_fpr_, roc_tpr_, roc_thresholds_, auc_, tpr_, tnr_, fpr_, fnr_
+        As in :class:`~slipkit.baselines.base.StreamDetector`.
+    n_features_in_ : int
+        Channels seen in ``fit`` (1).
+    """
+
+    _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
+        **StreamDetector._parameter_constraints,
+        "rate_hz": [Interval(Real, 0, None, closed="neither")],
+        "band_hz": ["array-like"],
+        "order": [Interval(Integral, 1, None, closed="left")],
+        "window": [Interval(Integral, 1, None, closed="left")],
+    }
+
+    def __init__(
+        self,
+        *,
+        rate_hz: float = 1000.0,
+        band_hz: Sequence[float] = (5.0, 15.0),
+        order: int = 2,
+        window: int = 100,
+        threshold: float | None = None,
+        roc_point: str = "youden",
+    ) -> None:
+        super().__init__(threshold=threshold, roc_point=roc_point)
+        self.rate_hz = rate_hz
+        self.band_hz = band_hz
+        self.order = order
+        self.window = window
+
+    def _sos(self) -> FloatArray:
+        lo, hi = (float(b) for b in self.band_hz)
+        if not 0 < lo < hi < self.rate_hz / 2:
+            raise ValueError(
+                f"band_hz must satisfy 0 < lo < hi < rate_hz / 2; got {self.band_hz}"
+            )
+        return np.asarray(
+            butter(
+                self.order, [lo, hi], btype="bandpass", fs=self.rate_hz, output="sos"
+            )
+        )
+
+    def _scores(self, X: FloatArray) -> FloatArray:
+        x = np.nan_to_num(X[:, 0])  # a dropped sample counts as zero deflection change
+        band = sosfilt(self._sos(), x)
+        out = np.full(len(x), -np.inf)
+        k = int(self.window)
+        if len(x) >= k:
+            out[k - 1 :] = np.sqrt(sliding_window_view(band * band, k).mean(axis=1))
+        return out
+
+    def _new_stream(self) -> DetectorStream:
+        return _BandStream(self)
+
+
+class _BandStream:
+    def __init__(self, det: TorsionalSlipDetector) -> None:
+        self.det = det
+        self.sos = det._sos()
+        self.reset()
+
+    def reset(self) -> None:
+        self.zi = np.zeros((self.sos.shape[0], 2))
+        self.buf: deque[float] = deque(maxlen=int(self.det.window))
+
+    def update(self, sample: ArrayLike) -> tuple[float, bool]:
+        x = float(np.nan_to_num(np.asarray(sample, dtype=np.float64).reshape(-1)[0]))
+        y, self.zi = sosfilt(self.sos, [x], zi=self.zi)
+        self.buf.append(float(y[0]) ** 2)
+        k = int(self.det.window)
+        if len(self.buf) < k:
+            return -np.inf, False
+        w = np.fromiter(self.buf, np.float64, k)
+        score = float(np.sqrt(sliding_window_view(w, k).mean(axis=1)[0]))
+        return score, score >= self.det.threshold_
+
+
+__all__ = [
+    "PAPER_F_MAX",
+    "DropAcceleration",
+    "StickSlipSpeed",
+    "TorsionalSlipDetector",
+    "dominant_frequency",
+    "f_max_values",
+    "speed_from_frequency",
+]
