@@ -1,0 +1,70 @@
+"""The gripper-PC runtime: load an ONNX bundle and decide slip on every sensor frame.
+
+Imports only the standard library, numpy and onnxruntime (and ``slipkit.errors``,
+standard library only), so ``pip install 'slipkit[runtime]'`` is enough to run it;
+``slipkit-run --report-modules`` shows which heavy libraries a run loaded (none).
+
+Modules: :mod:`~slipkit.runtime.bundle` (format, :func:`load_bundle`,
+:func:`write_bundle`), :mod:`~slipkit.runtime.preprocessing` (the op registry),
+:mod:`~slipkit.runtime.session` (session options), :mod:`~slipkit.runtime.loop`
+(:class:`StreamLoop`), :mod:`~slipkit.runtime.sources` (replay, UDP),
+:mod:`~slipkit.runtime.tuning` (:func:`choose_session`), :mod:`~slipkit.runtime.cli`
+(``slipkit-run``), :mod:`~slipkit.runtime.modules` (the import check).
+"""
+
+from slipkit.runtime.bundle import (
+    FORMAT,
+    MANIFEST_FILE,
+    MODEL_FILE,
+    REPLAY_FILE,
+    SCHEMA_VERSION,
+    Bundle,
+    Manifest,
+    load_bundle,
+    validate_manifest,
+    write_bundle,
+)
+from slipkit.runtime.errors import BundleError, FrameError
+from slipkit.runtime.loop import LoopResult, StreamLoop, latency_summary
+from slipkit.runtime.modules import HEAVY_MODULES, heavy_modules_loaded
+from slipkit.runtime.preprocessing import OPS, register_op
+from slipkit.runtime.session import SessionSpec
+from slipkit.runtime.sources import (
+    ReplaySource,
+    UdpSender,
+    UdpSource,
+    decode_frame,
+    encode_frame,
+    load_replay,
+)
+from slipkit.runtime.tuning import choose_session
+
+__all__ = [
+    "FORMAT",
+    "HEAVY_MODULES",
+    "MANIFEST_FILE",
+    "MODEL_FILE",
+    "OPS",
+    "REPLAY_FILE",
+    "SCHEMA_VERSION",
+    "Bundle",
+    "BundleError",
+    "FrameError",
+    "LoopResult",
+    "Manifest",
+    "ReplaySource",
+    "SessionSpec",
+    "StreamLoop",
+    "UdpSender",
+    "UdpSource",
+    "choose_session",
+    "decode_frame",
+    "encode_frame",
+    "heavy_modules_loaded",
+    "latency_summary",
+    "load_bundle",
+    "load_replay",
+    "register_op",
+    "validate_manifest",
+    "write_bundle",
+]

@@ -1,0 +1,251 @@
+"""``slipkit-run``: run a bundle's loop on recorded or streamed frames and check its latency budget.
+
+Usage::
+
+    slipkit-run exports/tactip_svm                       # the bundle's replay.npz
+    slipkit-run exports/tactip_svm --replay frames.npz --check --json out.json
+    slipkit-run exports/tactip_svm --udp 127.0.0.1:9000 --frames 1000
+    slipkit-run exports/tactip_svm --choose-session      # measure session options
+
+Exit status: 0 success; 1 ``--check`` failed (p99 over the manifest's budget, or no
+decision was made); 2 a bad bundle, replay file or argument (one-line message naming
+the file and field). argparse, not Hydra: a gripper PC has numpy and onnxruntime only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from slipkit.runtime._files import atomic_write_text
+from slipkit.runtime.bundle import Bundle, load_bundle
+from slipkit.runtime.errors import BundleError, FrameError
+from slipkit.runtime.loop import StreamLoop
+from slipkit.runtime.modules import heavy_modules_loaded
+from slipkit.runtime.sources import ReplaySource, UdpSource, load_replay
+from slipkit.runtime.tuning import choose_session
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="slipkit-run",
+        description="Run a slipkit ONNX bundle's decision loop frame by frame and report "
+        "per-frame latency (frame arrival -> decision) against the bundle's budget.",
+    )
+    p.add_argument(
+        "bundle", type=Path, help="bundle folder (model.onnx + manifest.json)"
+    )
+    src = p.add_mutually_exclusive_group()
+    src.add_argument(
+        "--replay",
+        type=Path,
+        help="frames to replay: .npz (frames, timestamps) or .npy; default: the bundle's replay.npz",
+    )
+    src.add_argument(
+        "--udp",
+        metavar="HOST:PORT",
+        help="receive frames as UDP datagrams (docs/deploy.md); port 0 picks a free port, printed on stderr",
+    )
+    p.add_argument(
+        "--frames",
+        type=int,
+        metavar="N",
+        help="stop after N frames (replay: the first N)",
+    )
+    p.add_argument(
+        "--timeout",
+        type=float,
+        default=2.0,
+        metavar="S",
+        help="UDP: stop when no frame arrives for S seconds (default 2)",
+    )
+    p.add_argument(
+        "--check",
+        action="store_true",
+        help="exit 1 when p99 latency exceeds the manifest's budget_ms.p99",
+    )
+    p.add_argument(
+        "--json",
+        type=Path,
+        metavar="OUT",
+        help="write the summary as JSON (atomically)",
+    )
+    p.add_argument(
+        "--io-binding",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="call the graph through a preallocated onnxruntime IOBinding (default; "
+        "measured faster, docs/deploy.md) or, with --no-io-binding, session.run",
+    )
+    p.add_argument(
+        "--choose-session",
+        action="store_true",
+        help="measure session option sets on the replay frames, print them fastest first, and exit",
+    )
+    p.add_argument(
+        "--rounds",
+        type=int,
+        default=3,
+        help="--choose-session: round-robin passes (default 3)",
+    )
+    p.add_argument(
+        "--report-modules",
+        action="store_true",
+        help="print (and add to --json) which heavy libraries (torch, sklearn, hydra, pandas, ...) were imported",
+    )
+    return p
+
+
+def _fmt(ms: float) -> str:
+    return f"{ms:.4f}"
+
+
+def _summary_lines(summary: dict[str, Any], source: str) -> list[str]:
+    s = summary
+    first = s["first_declared_s"]
+    lines = [
+        f"{s['bundle']}: {s['frames']} frames from {source}, {s['decisions']} decisions, "
+        f"{s['slip_decisions']} slip, {s['declared']} declared (debounce k={s['debounce_k']})"
+        + (f", first declared at {first:.4f} s" if first is not None else "")
+    ]
+    lat, budget = s["latency_ms"], s["budget_ms"]
+    if lat is not None:
+        lines.append(
+            "latency arrival->decision (ms): "
+            f"p50 {_fmt(lat['p50'])}  p99 {_fmt(lat['p99'])}  max {_fmt(lat['max'])}  mean {_fmt(lat['mean'])}"
+        )
+    verdict = {True: "met", False: "MISSED", None: "not measured (no decisions)"}[
+        s["within_budget"]
+    ]
+    lines.append(
+        f"budget: p99 <= {budget['p99']:g} ms (frame period {budget['frame_period']:g} ms): "
+        f"{verdict}; {s['over_budget']} decisions over budget, {s['over_period']} over the frame period"
+    )
+    return lines
+
+
+def _address(text: str) -> tuple[str, int]:
+    host, sep, port = text.rpartition(":")
+    if not sep or not host or not port.isdigit() or int(port) > 65535:
+        raise ValueError(f"--udp must be HOST:PORT (e.g. 127.0.0.1:9000); got {text!r}")
+    return host, int(port)
+
+
+def _replay(bundle: Bundle, path: Path | None) -> tuple[Any, Any, str]:
+    f = bundle.manifest.frame
+    path = path or bundle.replay_path
+    if path is None:
+        raise FrameError(
+            str(bundle.path),
+            "no frames: give --replay or --udp (the bundle has no replay.npz)",
+        )
+    frames, times = load_replay(path, f.shape, f.rate_hz)
+    return frames, times, str(path)
+
+
+def run(argv: Sequence[str] | None = None) -> int:
+    """Parse arguments, run, print; return the exit status (see the module docstring)."""
+    args = _parser().parse_args(argv)
+    bundle = load_bundle(args.bundle)
+    if args.frames is not None and args.frames < 1:
+        raise ValueError(f"--frames must be >= 1; got {args.frames}")
+    out: dict[str, Any]
+    if args.choose_session:
+        frames, times, name = _replay(bundle, args.replay)
+        n = len(frames) if args.frames is None else args.frames
+        rows = choose_session(
+            bundle,
+            frames,
+            times,
+            rounds=args.rounds,
+            max_frames=n,
+            io_binding=args.io_binding,
+        )
+        print(
+            f"{bundle.manifest.name}: session options on {min(n, len(frames))} frames of {name}, {args.rounds} rounds (median), fastest first"
+        )
+        print(
+            f"{'threads':>7} {'opt level':>9} {'spin':>5} {'p50 ms':>9} {'p99 ms':>9}"
+        )
+        for r in rows:
+            ss = r["session"]
+            print(
+                f"{ss['intra_op_num_threads']:>7} {ss['graph_optimization_level']:>9} {ss['allow_spinning']!s:>5} {r['p50_ms']:>9.4f} {r['p99_ms']:>9.4f}"
+            )
+        print('manifest "session": ' + json.dumps(rows[0]["session"]))
+        out = {"bundle": bundle.manifest.name, "session_candidates": rows}
+        status = 0
+    else:
+        loop = StreamLoop(bundle, io_binding=args.io_binding)
+        if args.udp is not None:
+            host, port = _address(args.udp)
+            with UdpSource(
+                host,
+                port,
+                bundle.manifest.frame.shape,
+                max_frames=args.frames,
+                timeout_s=args.timeout,
+            ) as src:
+                print(
+                    f"listening on {src.where} (frames of {src.n_values} float32 values, format v1)",
+                    file=sys.stderr,
+                    flush=True,
+                )
+                result = loop.run(src)
+            name = src.where
+            udp = {
+                "received": src.n_received,
+                "rejected": src.n_rejected,
+                "lost": src.n_lost,
+                "last_error": src.last_error,
+            }
+        else:
+            frames, times, name = _replay(bundle, args.replay)
+            if args.frames is not None:
+                frames, times = frames[: args.frames], times[: args.frames]
+            result = loop.run(ReplaySource(frames, times))
+            udp = None
+        out = result.summary()
+        out["source"] = name
+        out["io_binding"] = bool(args.io_binding)
+        out["session"] = bundle.session_spec.to_json()
+        for line in _summary_lines(out, Path(name).name if udp is None else name):
+            print(line)
+        if udp is not None:
+            out["udp"] = udp
+            print(
+                f"udp: {udp['received']} received, {udp['rejected']} rejected, {udp['lost']} lost"
+                + (
+                    f" (last rejected: {udp['last_error']})"
+                    if udp["last_error"]
+                    else ""
+                )
+            )
+        status = 1 if args.check and not out["within_budget"] else 0
+        if args.check:
+            print(f"check: {'passed' if status == 0 else 'FAILED'}")
+    if args.report_modules:
+        heavy = heavy_modules_loaded()
+        out["heavy_modules_loaded"] = heavy
+        print("heavy modules loaded: " + (", ".join(heavy) if heavy else "none"))
+    if args.json is not None:
+        atomic_write_text(args.json, json.dumps(out, indent=2) + "\n")
+    return status
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    """Entry point of the ``slipkit-run`` console script."""
+    try:
+        status = run(argv)
+    except (BundleError, FrameError, ValueError, OSError) as exc:
+        print(f"slipkit-run: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
+    raise SystemExit(status)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,49 @@
+"""Errors the gripper-PC runtime raises: each names the file and field, or the frame, at fault.
+
+Both derive from :class:`slipkit.errors.SlipkitError`, which imports only the standard
+library (checked by ``tests/runtime/test_cli.py``), so the runtime stays numpy +
+onnxruntime only while the ``slipkit`` CLI and ``slipkit-run`` treat these errors alike.
+"""
+
+from __future__ import annotations
+
+from slipkit.errors import SlipkitError
+
+
+class BundleError(SlipkitError, ValueError):
+    """A bundle folder is incomplete, tampered with, or its manifest breaks the schema.
+
+    Parameters
+    ----------
+    file : str
+        The file at fault (``exports/tactip_svm/manifest.json``).
+    field : str or None
+        The manifest field at fault in dotted form (``frame.rate_hz``,
+        ``preprocessing[1].scale``); None when the whole file is at fault.
+    problem : str
+        What is wrong and what was expected.
+    """
+
+    def __init__(self, file: str, field: str | None, problem: str) -> None:
+        self.file = file
+        self.field = field
+        self.problem = problem
+        where = file if field is None else f"{file}: field '{field}'"
+        super().__init__(f"{where}: {problem}")
+
+
+class FrameError(SlipkitError, ValueError):
+    """A recorded or received frame does not match the bundle's frame spec.
+
+    Parameters
+    ----------
+    where : str
+        The file (``replay.npz``) or socket (``udp 127.0.0.1:9000``) at fault.
+    problem : str
+        What is wrong, naming the array or header field and what was expected.
+    """
+
+    def __init__(self, where: str, problem: str) -> None:
+        self.where = where
+        self.problem = problem
+        super().__init__(f"{where}: {problem}")

@@ -1,0 +1,376 @@
+"""Frame sources for the loop: recorded replays and a UDP stream on loopback.
+
+Every source yields :class:`Frame` tuples ``(frame_index, timestamp, values, arrival_ns)``;
+``arrival_ns`` is :func:`time.perf_counter_ns` when the frame was handed over (for UDP:
+right after the datagram was received), so the loop's latency runs from arrival to
+decision.
+
+Replay files
+------------
+``.npz`` (what exporters put in a bundle as ``replay.npz``): ``frames`` of shape
+``(n, *frame.shape)`` (or ``(n, n_values)``) and ``timestamps`` of shape ``(n,)`` in s,
+non-decreasing; read with ``allow_pickle=False``. ``.npy``: ``frames`` only; the
+timestamps are ``index / frame.rate_hz``.
+
+UDP frame format (version 1)
+----------------------------
+One frame per datagram, little-endian::
+
+    offset  size  type      field
+    0       4     bytes     magic b"SLPK"
+    4       2     uint16    version (1)
+    6       2     uint16    flags (0; reserved)
+    8       8     uint64    frame index (increasing; gaps count as lost frames)
+    16      8     float64   timestamp, s (sensor clock)
+    24      4     uint32    n_values
+    28      4*n   float32   values, C order of frame.shape (channel order of the manifest)
+
+A datagram that breaks the format, has the wrong ``n_values`` or an index not above the
+last one is skipped and counted in :attr:`UdpSource.n_rejected` (a live loop must not
+stop on one bad packet); the last reason is kept in :attr:`UdpSource.last_error`.
+"""
+
+from __future__ import annotations
+
+import math
+import socket
+import struct
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from types import TracebackType
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from slipkit.runtime.errors import FrameError
+
+MAGIC = b"SLPK"
+VERSION = 1
+#: magic, version, flags, frame index, timestamp (s), n_values.
+HEADER = struct.Struct("<4sHHQdI")
+HEADER_SIZE = HEADER.size  # 28 bytes
+
+
+class Frame(NamedTuple):
+    """One sensor frame as a source hands it to the loop.
+
+    Attributes
+    ----------
+    frame_index : int
+        Frame index (replay: row number; UDP: the sender's index).
+    timestamp : float
+        Sensor time, s.
+    values : ndarray of shape frame.shape
+        The values; for UDP a view of the receive buffer, valid until the next
+        frame is read (the loop copies it into its ring buffer at once).
+    arrival_ns : int
+        :func:`time.perf_counter_ns` at hand-over.
+    """
+
+    frame_index: int
+    timestamp: float
+    values: NDArray[np.floating]
+    arrival_ns: int
+
+
+def encode_frame(index: int, timestamp: float, values: ArrayLike) -> bytes:
+    """One frame as a version-1 datagram (see the module docstring)."""
+    arr = np.ascontiguousarray(values, dtype="<f4").reshape(-1)
+    return (
+        HEADER.pack(MAGIC, VERSION, 0, int(index), float(timestamp), arr.size)
+        + arr.tobytes()
+    )
+
+
+def decode_frame(
+    data: bytes, where: str = "udp frame"
+) -> tuple[int, float, NDArray[np.float32]]:
+    """Parse a version-1 datagram into ``(index, timestamp, values)``.
+
+    Raises
+    ------
+    FrameError
+        Naming the header field that is wrong.
+    """
+    if len(data) < HEADER_SIZE:
+        raise FrameError(
+            where, f"{len(data)} bytes is shorter than the {HEADER_SIZE}-byte header"
+        )
+    magic, version, _flags, index, ts, n = HEADER.unpack_from(data)
+    if magic != MAGIC:
+        raise FrameError(where, f"magic is {magic!r}, expected {MAGIC!r}")
+    if version != VERSION:
+        raise FrameError(where, f"version is {version}, this runtime reads {VERSION}")
+    if len(data) != HEADER_SIZE + 4 * n:
+        raise FrameError(
+            where,
+            f"n_values is {n} but the payload holds {(len(data) - HEADER_SIZE) / 4:g} float32 values",
+        )
+    return index, ts, np.frombuffer(data, dtype="<f4", count=n, offset=HEADER_SIZE)
+
+
+def check_replay_arrays(
+    frames: np.ndarray, timestamps: np.ndarray, frame_shape: tuple[int, ...], where: str
+) -> tuple[NDArray[np.floating], NDArray[np.float64]]:
+    """Check recorded frames and timestamps against a frame shape.
+
+    Returns ``frames`` as ``(n, *frame_shape)`` (float32 kept, other numbers as
+    float64) and ``timestamps`` as float64; :class:`FrameError` names the array.
+    """
+    if frames.dtype.kind not in "fiu" or frames.ndim < 2 or len(frames) == 0:
+        raise FrameError(
+            where,
+            f"'frames' must be a non-empty numeric array (n, *frame shape); got {frames.dtype} {frames.shape}",
+        )
+    n = len(frames)
+    if frames.shape[1:] != tuple(frame_shape):
+        if math.prod(frames.shape[1:]) != math.prod(frame_shape):
+            raise FrameError(
+                where,
+                f"'frames' has frames of shape {list(frames.shape[1:])}; the bundle's frame.shape is {list(frame_shape)}",
+            )
+        frames = frames.reshape(n, *frame_shape)
+    if frames.dtype != np.float32:
+        frames = frames.astype(np.float64)
+    times = np.asarray(timestamps, dtype=np.float64)
+    if times.shape != (n,):
+        raise FrameError(
+            where,
+            f"'timestamps' must have shape ({n},), one per frame; got {times.shape}",
+        )
+    if not np.all(np.isfinite(times)) or np.any(np.diff(times) < 0):
+        raise FrameError(where, "'timestamps' must be finite and non-decreasing (s)")
+    return frames, times
+
+
+def load_replay(
+    path: str | Path, frame_shape: tuple[int, ...], rate_hz: float
+) -> tuple[NDArray[np.floating], NDArray[np.float64]]:
+    """Read a ``.npz`` (frames + timestamps) or ``.npy`` (frames) replay file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    frame_shape : tuple of int
+        The bundle's ``frame.shape``.
+    rate_hz : float
+        Frame rate, Hz, for the timestamps of a ``.npy`` file.
+
+    Returns
+    -------
+    frames : ndarray of shape (n, *frame_shape)
+    timestamps : ndarray of shape (n,), s
+    """
+    p = Path(path)
+    where = str(p)
+    if not p.is_file():
+        raise FrameError(where, "replay file not found")
+    try:
+        loaded = np.load(p, allow_pickle=False)
+    except (OSError, ValueError) as exc:
+        raise FrameError(
+            where, f"not a numpy .npz/.npy file without pickles: {exc}"
+        ) from None
+    if isinstance(loaded, np.lib.npyio.NpzFile):
+        with loaded:
+            if "frames" not in loaded.files:
+                raise FrameError(
+                    where, f"has no 'frames' array; arrays: {loaded.files}"
+                )
+            frames = loaded["frames"]
+            times = loaded["timestamps"] if "timestamps" in loaded.files else None
+    else:
+        frames, times = loaded, None
+    if times is None:
+        times = np.arange(len(frames), dtype=np.float64) / rate_hz
+    return check_replay_arrays(frames, times, frame_shape, where)
+
+
+class ReplaySource:
+    """Recorded frames handed to the loop as fast as it takes them.
+
+    Parameters
+    ----------
+    frames : ndarray of shape (n, *frame.shape)
+        The frames.
+    timestamps : ndarray of shape (n,)
+        Their times, s.
+    """
+
+    def __init__(
+        self, frames: NDArray[np.floating], timestamps: NDArray[np.float64]
+    ) -> None:
+        self.frames = frames
+        self.timestamps = timestamps
+
+    @classmethod
+    def from_file(
+        cls, path: str | Path, frame_shape: tuple[int, ...], rate_hz: float
+    ) -> ReplaySource:
+        """A source over a replay file (see :func:`load_replay`)."""
+        return cls(*load_replay(path, frame_shape, rate_hz))
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def __iter__(self) -> Iterator[Frame]:
+        clock = time.perf_counter_ns
+        for i, (values, ts) in enumerate(
+            zip(self.frames, self.timestamps.tolist(), strict=True)
+        ):
+            yield Frame(i, ts, values, clock())
+
+
+class UdpSource:
+    """Frames received as version-1 datagrams on a UDP socket.
+
+    Parameters
+    ----------
+    host : str
+        Address to bind (``127.0.0.1`` for loopback).
+    port : int
+        Port to bind; 0 picks a free one (see :attr:`address`).
+    frame_shape : tuple of int
+        The bundle's ``frame.shape``: datagrams must carry ``prod(frame_shape)`` values.
+    max_frames : int, optional
+        Stop after this many accepted frames.
+    timeout_s : float
+        Stop when no datagram arrives for this long, s.
+
+    Attributes
+    ----------
+    address : tuple of (str, int)
+        The bound address.
+    n_received, n_rejected, n_lost : int
+        Accepted datagrams, skipped datagrams, and frames missing from gaps in the index.
+    timed_out : bool
+        The stream ended because nothing arrived within ``timeout_s``.
+    last_error : str or None
+        Why the last datagram was rejected.
+    """
+
+    def __init__(
+        self,
+        host: str,
+        port: int,
+        frame_shape: tuple[int, ...],
+        *,
+        max_frames: int | None = None,
+        timeout_s: float = 2.0,
+    ) -> None:
+        self.frame_shape = tuple(frame_shape)
+        self.n_values = math.prod(self.frame_shape)
+        self.max_frames = max_frames
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        # A larger receive queue rides out a burst while the loop runs the model.
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+        self.sock.bind((host, port))
+        self.sock.settimeout(timeout_s)
+        self.address: tuple[str, int] = self.sock.getsockname()
+        self.where = f"udp {self.address[0]}:{self.address[1]}"
+        self.expected = HEADER_SIZE + 4 * self.n_values
+        # One byte more than a valid datagram, so an oversized one shows up as too long.
+        self._buf = bytearray(self.expected + 1)
+        self._values = np.frombuffer(
+            self._buf, dtype="<f4", count=self.n_values, offset=HEADER_SIZE
+        ).reshape(self.frame_shape)
+        self.n_received = self.n_rejected = self.n_lost = 0
+        self.timed_out = False
+        self.last_error: str | None = None
+
+    def _reject(self, problem: str) -> None:
+        self.n_rejected += 1
+        self.last_error = problem
+
+    def __iter__(self) -> Iterator[Frame]:
+        recv_into, clock, buf = self.sock.recv_into, time.perf_counter_ns, self._buf
+        last = -1
+        while self.max_frames is None or self.n_received < self.max_frames:
+            try:
+                n = recv_into(buf)
+            except TimeoutError:
+                self.timed_out = True
+                return
+            arrival = clock()
+            if n != self.expected:
+                self._reject(
+                    f"datagram of {n} bytes; a frame of {self.n_values} values is {self.expected}"
+                )
+                continue
+            magic, version, _flags, index, ts, nv = HEADER.unpack_from(buf)
+            if magic != MAGIC or version != VERSION or nv != self.n_values:
+                self._reject(
+                    f"header magic={magic!r} version={version} n_values={nv}; expected {MAGIC!r}, {VERSION}, {self.n_values}"
+                )
+                continue
+            if index <= last:
+                self._reject(
+                    f"frame index {index} is not above the last one ({last}): late or repeated"
+                )
+                continue
+            if last >= 0:
+                self.n_lost += index - last - 1
+            last = index
+            self.n_received += 1
+            yield Frame(index, ts, self._values, arrival)
+
+    def close(self) -> None:
+        """Close the socket."""
+        self.sock.close()
+
+    def __enter__(self) -> UdpSource:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+class UdpSender:
+    """Sends frames as version-1 datagrams (tests, docs, and a sensor bridge's model).
+
+    Parameters
+    ----------
+    host, port : str, int
+        Where the loop's :class:`UdpSource` listens.
+    """
+
+    def __init__(self, host: str, port: int) -> None:
+        self.address = (host, port)
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+
+    def send(self, index: int, timestamp: float, values: ArrayLike) -> None:
+        """Send one frame (index, timestamp in s, values in manifest channel order)."""
+        self.sock.sendto(encode_frame(index, timestamp, values), self.address)
+
+    def send_all(
+        self, frames: ArrayLike, timestamps: ArrayLike, *, pace_s: float = 0.0
+    ) -> None:
+        """Send frames ``0..n-1``; ``pace_s`` sleeps between frames (0: as fast as possible)."""
+        arr = np.asarray(frames)
+        for i, ts in enumerate(np.asarray(timestamps, dtype=np.float64).tolist()):
+            self.send(i, ts, arr[i])
+            if pace_s:
+                time.sleep(pace_s)
+
+    def close(self) -> None:
+        """Close the socket."""
+        self.sock.close()
+
+    def __enter__(self) -> UdpSender:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()

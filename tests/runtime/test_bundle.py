@@ -1,0 +1,280 @@
+"""Bundle format: writing, loading, and refusing tampered or malformed bundles."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from tests.runtime.helpers import LinearCase, linear_graph, manifest
+
+from slipkit.errors import SlipkitError
+from slipkit.runtime import (
+    FORMAT,
+    SCHEMA_VERSION,
+    BundleError,
+    FrameError,
+    load_bundle,
+    validate_manifest,
+    write_bundle,
+)
+
+
+@pytest.fixture
+def case(tmp_path: Path) -> LinearCase:
+    return LinearCase(tmp_path)
+
+
+def test_round_trip_keeps_every_field(case: LinearCase) -> None:
+    """A written bundle loads back with the frame spec, rule, budget and file hashes it was given."""
+    bundle = load_bundle(case.path)
+    m = bundle.manifest
+    assert (FORMAT, SCHEMA_VERSION) == (m.raw["format"], m.raw["schema_version"])
+    assert (4, 1, 100.0, (3,)) == (
+        m.frame.window,
+        m.frame.hop,
+        m.frame.rate_hz,
+        m.frame.shape,
+    )
+    assert case.threshold == m.decision.threshold
+    assert ("threshold", "slip", 2) == (
+        m.decision.rule,
+        m.decision.positive,
+        m.debounce_k,
+    )
+    assert (10.0, 1.0) == (m.budget.frame_period_ms, m.budget.p99_ms)
+    assert {"model.onnx", "replay.npz"} == set(m.files)
+    assert case.path / "replay.npz" == bundle.replay_path
+    assert "abc123" == m.training["data_fingerprint"]
+
+
+def test_tampered_model_is_refused_naming_the_file(case: LinearCase) -> None:
+    """A model.onnx changed after export is refused before onnxruntime sees it, naming the file."""
+    model = case.path / "model.onnx"
+    model.write_bytes(linear_graph(np.ones(12), 0.0))
+    with pytest.raises(
+        BundleError, match=r"model\.onnx: sha256 .* field 'files\.model\.onnx'"
+    ) as info:
+        load_bundle(case.path)
+    assert str(model) == info.value.file
+
+
+def test_tampered_replay_is_refused(case: LinearCase) -> None:
+    """A listed replay.npz whose bytes changed is refused, naming it."""
+    (case.path / "replay.npz").write_bytes(b"not the recording")
+    with pytest.raises(BundleError, match=r"replay\.npz: sha256"):
+        load_bundle(case.path)
+
+
+def _drop(path: str) -> Any:
+    *parents, last = path.split(".")
+
+    def fn(man: dict[str, Any]) -> None:
+        obj = man
+        for p in parents:
+            obj = obj[p]
+        del obj[last]
+
+    return fn
+
+
+@pytest.mark.parametrize(
+    "field",
+    [
+        "format",
+        "schema_version",
+        "name",
+        "frame",
+        "frame.rate_hz",
+        "frame.window",
+        "frame.channels",
+        "inputs",
+        "outputs",
+        "decision",
+        "decision.rule",
+        "threshold",
+        "debounce",
+        "debounce.k",
+        "budget_ms",
+        "budget_ms.p99",
+        "opset",
+        "producer",
+        "files",
+    ],
+)
+def test_missing_field_is_named(case: LinearCase, field: str) -> None:
+    """Each required manifest field, when absent, is refused with its dotted name."""
+    case.edit_manifest(_drop(field))
+    with pytest.raises(BundleError) as info:
+        load_bundle(case.path)
+    assert str(case.path / "manifest.json") == info.value.file
+    assert field == info.value.field
+
+
+def _set(path: str, value: Any) -> Any:
+    *parents, last = path.split(".")
+
+    def fn(man: dict[str, Any]) -> None:
+        obj: Any = man
+        for p in parents:
+            obj = obj[int(p)] if p.isdigit() else obj[p]
+        obj[int(last) if last.isdigit() else last] = value
+
+    return fn
+
+
+@pytest.mark.parametrize(
+    ("path", "value", "field"),
+    [
+        ("format", "onnx-zip", "format"),
+        ("schema_version", 2, "schema_version"),
+        ("schema_version", "1", "schema_version"),
+        ("frame.window", 0, "frame.window"),
+        ("frame.hop", 1.5, "frame.hop"),
+        ("frame.rate_hz", "fast", "frame.rate_hz"),
+        ("frame.rate_hz", -100.0, "frame.rate_hz"),
+        ("frame.channels", ["a", "b"], "frame.channels"),
+        ("frame.channels", ["a", "a", "b"], "frame.channels"),
+        ("threshold", math.nan, "threshold"),
+        ("threshold", "0.5", "threshold"),
+        ("debounce.k", True, "debounce.k"),
+        ("debounce.k", 0, "debounce.k"),
+        ("budget_ms.p99", 11.0, "budget_ms.p99"),
+        ("decision.rule", "max", "decision.rule"),
+        ("decision.output", "logits", "decision.output"),
+        ("decision.positive", "slipping", "decision.positive"),
+        ("decision.column", 1, "decision.column"),
+        ("inputs.0.name", "features", "inputs[0].name"),
+        ("inputs.0.shape", [1, 13], "inputs[0].shape"),
+        ("inputs.0.dtype", "int64", "inputs[0].dtype"),
+        ("outputs.0.name", "proba", "decision.output"),
+        ("outputs", [{"name": "score"}, {"name": "proba"}], "outputs[1].name"),
+        ("preprocessing.0.op", "eval", "preprocessing[0].op"),
+        ("preprocessing.0.scale", [1.0, 0.0, 1.0], "preprocessing[0].scale"),
+        ("preprocessing.0.mean", [1.0, 2.0], "preprocessing[0].mean"),
+        ("preprocessing.0.code", "import os", "preprocessing[0].code"),
+        ("session.graph_optimization_level", "max", "session.graph_optimization_level"),
+        ("session.warmup", -1, "session.warmup"),
+        ("training", [], "training"),
+        ("producer.onnx", 1.23, "producer.onnx"),
+        ("files.model.onnx", "deadbeef", "files.model.onnx"),
+        ("pickle", "yes", "pickle"),
+    ],
+)
+def test_invalid_field_is_named(
+    case: LinearCase, path: str, value: Any, field: str
+) -> None:
+    """A field of the wrong type or range (or an unknown one) is refused with its dotted name."""
+    if path == "files.model.onnx":
+        case.edit_manifest(lambda m: m["files"].__setitem__("model.onnx", value))
+    else:
+        case.edit_manifest(_set(path, value))
+    with pytest.raises(BundleError) as info:
+        load_bundle(case.path)
+    assert field == info.value.field
+
+
+def test_not_json_is_refused(case: LinearCase) -> None:
+    """A manifest that is not JSON is refused naming manifest.json."""
+    (case.path / "manifest.json").write_text("{format: slipkit")
+    with pytest.raises(BundleError, match=r"manifest\.json: is not valid JSON"):
+        load_bundle(case.path)
+
+
+def test_missing_folder_and_files(tmp_path: Path, case: LinearCase) -> None:
+    """A missing folder, manifest or listed file is refused naming the path."""
+    with pytest.raises(BundleError, match="not a bundle folder"):
+        load_bundle(tmp_path / "nope")
+    (case.path / "replay.npz").unlink()
+    with pytest.raises(BundleError, match=r"replay\.npz: is missing"):
+        load_bundle(case.path)
+    (case.path / "manifest.json").unlink()
+    with pytest.raises(BundleError, match=r"manifest\.json: is missing"):
+        load_bundle(case.path)
+
+
+def test_bundle_error_is_a_slipkit_error() -> None:
+    """BundleError is a SlipkitError (the slipkit CLI prints it without a traceback)."""
+    assert issubclass(BundleError, SlipkitError)
+
+
+def test_failed_write_leaves_nothing(tmp_path: Path) -> None:
+    """write_bundle with a manifest that does not match the graph leaves no folder behind."""
+    man = manifest(13, threshold=0.0)  # the graph below takes 12 values
+    with pytest.raises(BundleError, match=r"inputs\[0\]\.shape"):
+        write_bundle(tmp_path / "b", linear_graph(np.ones(12), 0.0), man)
+    assert [] == list(tmp_path.iterdir())
+
+
+def test_write_refuses_existing_folder_unless_overwrite(case: LinearCase) -> None:
+    """An existing bundle is replaced only with overwrite=True."""
+    man = manifest(12, threshold=1.5, window=4)
+    with pytest.raises(BundleError, match="already exists"):
+        write_bundle(case.path, linear_graph(np.ones(12), 0.0), man)
+    write_bundle(case.path, linear_graph(np.ones(12), 0.0), man, overwrite=True)
+    assert 1.5 == load_bundle(case.path).manifest.decision.threshold
+    assert ["linear"] == [p.name for p in case.path.parent.iterdir()]
+
+
+def test_dynamic_batch_dimension_is_accepted(tmp_path: Path) -> None:
+    """A graph with a symbolic batch dimension loads with the manifest's concrete shape."""
+    write_bundle(
+        tmp_path / "b", linear_graph(np.ones(12), 0.0, batch="N"), manifest(12)
+    )
+    assert (1, 12) == load_bundle(tmp_path / "b").manifest.inputs[0].shape
+
+
+def test_manifest_is_plain_json(case: LinearCase) -> None:
+    """numpy parameters given to write_bundle are stored as JSON lists, nothing else."""
+    man = json.loads((case.path / "manifest.json").read_text())
+    assert case.mean.tolist() == man["preprocessing"][0]["mean"]
+
+
+json_values = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=5),
+    lambda inner: (
+        st.lists(inner, max_size=3)
+        | st.dictionaries(st.text(max_size=5), inner, max_size=3)
+    ),
+    max_leaves=6,
+)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    field=st.sampled_from(["rate_hz", "window", "hop", "shape", "channels"]),
+    value=json_values,
+)
+def test_any_json_value_is_accepted_or_named(field: str, value: Any) -> None:
+    """Whatever JSON sits in a frame field, validation accepts it or names that field."""
+    man = manifest(12)
+    man.update(
+        format=FORMAT, schema_version=SCHEMA_VERSION, files={"model.onnx": "0" * 64}
+    )
+    man["frame"][field] = value
+    fields = []
+    try:
+        validate_manifest(man)
+    except BundleError as exc:
+        fields.append(exc.field)
+    # A well-typed shape that disagrees with the channel count is named at the
+    # cross-field check on frame.channels (whose message quotes frame.shape).
+    named = [f"frame.{field}"] + (["frame.channels"] if field == "shape" else [])
+    assert fields in ([], *([n] for n in named))
+
+
+def test_write_refuses_replay_of_the_wrong_shape(tmp_path: Path) -> None:
+    """Replay frames that do not match frame.shape are refused before anything is written."""
+    with pytest.raises(FrameError, match=r"frames of shape \[5\]"):
+        write_bundle(
+            tmp_path / "b",
+            linear_graph(np.ones(12), 0.0),
+            manifest(12),
+            replay=(np.zeros((10, 5)), np.arange(10.0)),
+        )
+    assert [] == list(tmp_path.iterdir())
