@@ -1,0 +1,56 @@
+"""`pip install 'slipkit[runtime]'` on a fresh venv runs a bundle with numpy + onnxruntime only."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from slipkit.runtime.modules import heavy_modules_loaded
+from tests.runtime.helpers import pin_bundle, run_cli_reporting_modules
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _run(*cmd: str) -> subprocess.CompletedProcess[str]:
+    done = subprocess.run(cmd, capture_output=True, text=True, check=False, timeout=900)
+    assert 0 == done.returncode, f"{' '.join(cmd)}\n{done.stderr[-3000:]}"
+    return done
+
+
+@pytest.mark.slow
+def test_runtime_extra_installs_and_runs_without_the_training_stack(
+    tmp_path: Path,
+) -> None:
+    """A fresh venv with slipkit[runtime] holds no torch/sklearn/hydra/pandas and runs a bundle."""
+    _run(
+        sys.executable,
+        "-m",
+        "pip",
+        "wheel",
+        "--no-deps",
+        "--no-build-isolation",
+        "-q",
+        "-w",
+        str(tmp_path / "wheel"),
+        str(ROOT),
+    )
+    (wheel,) = (tmp_path / "wheel").glob("slipkit-*.whl")
+    venv = tmp_path / "venv"
+    _run(sys.executable, "-m", "venv", str(venv))
+    python = str(venv / "bin" / "python")
+    _run(python, "-m", "pip", "install", "-q", f"{wheel}[runtime]")
+    installed = _run(python, "-m", "pip", "list", "--format=freeze").stdout.lower()
+    names = {line.split("==")[0] for line in installed.splitlines()}
+    assert set() == names & {"torch", "scikit-learn", "hydra-core", "pandas", "scipy"}
+    assert {"numpy", "onnxruntime"} <= names
+
+    summary, imported = run_cli_reporting_modules(
+        python, pin_bundle(tmp_path / "bundles"), tmp_path / "s.json"
+    )
+    assert [] == heavy_modules_loaded(imported)
+    assert [] == summary["heavy_modules_loaded"]
+    assert 0 < summary["decisions"]
+    assert (venv / "bin" / "slipkit-run").is_file()
