@@ -7,9 +7,9 @@ import sys
 from pathlib import Path
 
 import pytest
+from tests.runtime.helpers import pin_bundle, run_cli_reporting_modules
 
 from slipkit.runtime.modules import heavy_modules_loaded
-from tests.runtime.helpers import pin_bundle, run_cli_reporting_modules
 
 ROOT = Path(__file__).resolve().parents[2]
 
