@@ -1,0 +1,54 @@
+"""ONNX exporters: fitted estimators -> :class:`ExportedGraph` (graph + what it means).
+
+Importing this package registers every exporter (one module per family, each
+ending with its ``register_exporter`` call, as sklearn-onnx's converters):
+
+* :mod:`slipkit.export.svm` -- ``TacTipSVM`` as MatMul/Exp ops, optionally with the
+  pin-velocity features inside (:mod:`slipkit.export.pins`);
+* :mod:`slipkit.export.sklearn` -- every class skl2onnx converts, Pipelines included;
+* :mod:`slipkit.export.torch` -- torch modules and skorch nets (legacy exporter).
+
+:func:`export` picks the exporter by the estimator's class (MRO walk) and
+:func:`slipkit.export.parity.check_parity` compares the graph in onnxruntime with
+the estimator. The export side needs the ``train`` extra (onnx, skl2onnx, torch);
+the gripper-PC runtime only loads the resulting ``.onnx`` files.
+"""
+
+from __future__ import annotations
+
+from slipkit.export import sklearn as _sklearn  # noqa: F401  (registers exporters)
+from slipkit.export import svm as _svm  # noqa: F401
+from slipkit.export import torch as _torch  # noqa: F401
+from slipkit.export.parity import check_parity
+from slipkit.export.pins import export_velocity_features
+from slipkit.export.registry import (
+    ExportedGraph,
+    ExportError,
+    NoExporterError,
+    export,
+    exporter_for,
+    register_exporter,
+)
+from slipkit.export.sklearn import export_sklearn
+from slipkit.export.svm import export_tactip_svm
+from slipkit.export.torch import (
+    export_skorch_estimator,
+    export_torch_module,
+    find_torch_parts,
+)
+
+__all__ = [
+    "ExportError",
+    "ExportedGraph",
+    "NoExporterError",
+    "check_parity",
+    "export",
+    "export_sklearn",
+    "export_skorch_estimator",
+    "export_tactip_svm",
+    "export_torch_module",
+    "export_velocity_features",
+    "exporter_for",
+    "find_torch_parts",
+    "register_exporter",
+]
