@@ -48,6 +48,8 @@ def optuna_search(
     seed : int
         Seed of the TPE sampler: the same inputs give the same search.
     """
+    # optuna 2.10 imports alembic, which logs its plugin setup at INFO to our stdout log.
+    logging.getLogger("alembic").setLevel(logging.WARNING)
     import optuna
 
     if n_trials < 1:

@@ -1,0 +1,322 @@
+"""TacTip tasks end to end: experiment=tactip_svm and experiment=tactip_table1 (paper Table I)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+from pathlib import Path
+from typing import Any
+
+import joblib
+import numpy as np
+import pandas as pd
+import pytest
+from hydra import compose, initialize_config_dir
+from hypothesis import given
+from hypothesis import strategies as st
+from omegaconf import DictConfig
+
+import slipkit
+from slipkit.data.dataset import Dataset
+from slipkit.data.io import save_dataset
+from slipkit.errors import SlipkitError
+from slipkit.models.svm import TacTipSVM
+from slipkit.sim.commands import build_scene
+from slipkit.train import search as search_module
+from slipkit.train.commands import evaluate_main, train_main
+from slipkit.train.runs import read_run
+from slipkit.train.tasks import tactip as tactip_module
+from slipkit.train.tasks.tactip_table import (
+    LINEAR_DEFAULT_C,
+    PAPER_TABLE1,
+    TacTipTable1,
+    _majority,
+)
+
+#: Short trials of 19 pins (the centre and two rings) keep every run around a second.
+SMALL_SCENE = [
+    "scene.model.n_pins=19",
+    "scene.model.duration_s=1.0",
+    "scene.model.onset_s=[0.4,0.7]",
+]
+#: Table I on 12 runs of three objects (seed 0: 4 flat, so 2 train / 2 test flat runs),
+#: with a 2-candidate search and 2-fold group CV per row.
+SMALL_TABLE = [
+    "experiment=tactip_table1",
+    *SMALL_SCENE,
+    "scene.model.objects=[flat,r20,r80]",
+    "dataset.n_trials=12",
+    "task.search.n_trials=2",
+    "task.search.cv=2",
+]
+SMALL_SVM = [
+    "experiment=tactip_svm",
+    *SMALL_SCENE,
+    "dataset.n_trials=8",
+    "task.search.n_trials=2",
+    "task.search.cv=2",
+]
+RUN_FILES = {"config.yaml", "run.json", "metrics.json", "model.joblib", "train.log"}
+TABLE_FILES = {"table1.csv", "table1.md", "curved.csv", "curved.md", "table1.png"}
+PAPER_PERCENT = [99.11, 98.95, 97.21, 95.07, 94.66, 70.58, 99.88]
+
+
+def _compose(config: str, overrides: list[str]) -> DictConfig:
+    with initialize_config_dir(
+        config_dir=str(slipkit.config_dir()), version_base="1.3"
+    ):
+        return compose(config_name=config, overrides=overrides)
+
+
+def train(overrides: list[str], run: Path) -> Path:
+    """Run ``slipkit train`` in-process into the folder ``run``."""
+    train_main(_compose("train", [*overrides, f"run_dir={run}"]))
+    return run
+
+
+def metrics_of(run: Path) -> dict[str, Any]:
+    return json.loads((run / "metrics.json").read_text())
+
+
+def folder_state(path: Path) -> dict[str, tuple[str, int]]:
+    """sha256 and mtime (ns) of every file under ``path``."""
+    return {
+        str(p.relative_to(path)): (
+            hashlib.sha256(p.read_bytes()).hexdigest(),
+            p.stat().st_mtime_ns,
+        )
+        for p in sorted(path.rglob("*"))
+        if p.is_file()
+    }
+
+
+@pytest.fixture(scope="module")
+def table_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return train(SMALL_TABLE, tmp_path_factory.mktemp("table") / "run")
+
+
+@pytest.fixture(scope="module")
+def svm_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return train(SMALL_SVM, tmp_path_factory.mktemp("svm") / "run")
+
+
+@pytest.fixture(scope="module")
+def small_dataset() -> Dataset:
+    """The in-memory dataset of SMALL_TABLE (12 runs: flat, r20, r80)."""
+    cfg = _compose("train", SMALL_TABLE)
+    return build_scene(cfg.scene).simulate(12, 0, progress=False)
+
+
+@pytest.fixture
+def search_spy(monkeypatch: pytest.MonkeyPatch) -> list[set[str]]:
+    """Trial ids of the frames handed to every in-run Optuna search."""
+    seen: list[set[str]] = []
+
+    def spy(*args: Any, **kwargs: Any) -> Any:
+        seen.append(set(map(str, args[3])))  # (estimator, X, y, groups)
+        return search_module.optuna_search(*args, **kwargs)
+
+    monkeypatch.setattr(tactip_module, "optuna_search", spy)
+    return seen
+
+
+# -- experiment=tactip_svm ------------------------------------------------------
+def test_tactip_svm_run_writes_every_file(svm_run: Path) -> None:
+    """experiment=tactip_svm writes the run files and the test predictions."""
+    assert RUN_FILES | {"test_predictions.csv"} == {p.name for p in svm_run.iterdir()}
+    info = json.loads((svm_run / "run.json").read_text())
+    assert "test.accuracy" == info["objective"]["name"]
+    assert metrics_of(svm_run)["test"]["accuracy"] == info["objective"]["value"]
+
+
+def test_tactip_svm_search_sees_only_the_training_half(
+    tmp_path: Path, search_spy: list[set[str]]
+) -> None:
+    """The in-run search of experiment=tactip_svm gets frames of training trials only."""
+    run = train(SMALL_SVM, tmp_path / "run")
+    split = metrics_of(run)["split"]
+    assert 1 == len(search_spy)
+    assert set(split["train"]) == search_spy[0]
+    assert set() == search_spy[0] & set(split["test"])
+
+
+# -- experiment=tactip_table1 ---------------------------------------------------
+def test_table1_run_writes_every_file(table_run: Path) -> None:
+    """experiment=tactip_table1 writes the run files, both tables (csv + md) and the plot."""
+    assert RUN_FILES | TABLE_FILES == {p.name for p in table_run.iterdir()}
+    assert (table_run / "table1.png").stat().st_size > 10_000
+
+
+def test_table1_has_seven_rows_with_the_published_figures(table_run: Path) -> None:
+    """Six kernel x feature rows ('all slip frames') and the N=4 row, beside the paper's %."""
+    table = pd.read_csv(table_run / "table1.csv")
+    rows = metrics_of(table_run)["rows"]
+    assert PAPER_PERCENT == table["paper_percent"].tolist()
+    assert PAPER_PERCENT == [r["paper_percent"] for r in rows]
+    assert ["all"] * 6 + ["4"] == table["slip_frames"].astype(str).tolist()
+    assert ["Gaussian"] * 3 + ["linear"] * 3 + ["Gaussian"] == table["kernel"].tolist()
+    for r in rows:
+        p = r["params"]
+        if r["kernel"] == "rbf":
+            assert pytest.approx(1.0 / np.sqrt(p["gamma"])) == p["kernel_scale"]
+        assert "optuna" == r["params_source"]
+        assert {"balanced_accuracy", "detection"} <= set(r["test"])
+    md = (table_run / "table1.md").read_text()
+    assert "99.88" in md
+    assert "balanced" in md
+
+
+def test_table1_saves_the_main_row_and_scores_its_objective(table_run: Path) -> None:
+    """model.joblib is the N=4 Gaussian (dr, dtheta) SVM; the objective is its test accuracy."""
+    metrics = metrics_of(table_run)
+    main = next(r for r in metrics["rows"] if r["main"])
+    model = joblib.load(table_run / "model.joblib")
+    assert ("gaussian_dr_dtheta_n4", 4) == (main["name"], main["n_slip"])
+    assert (2 * 19, "rbf") == (model.n_features_in_, model.kernel)
+    assert pytest.approx(main["params"]["C"]) == model.C
+    assert main["test"] == metrics["test"]
+    info = json.loads((table_run / "run.json").read_text())
+    assert main["test"]["accuracy"] == info["objective"]["value"]
+
+
+def test_table1_curved_rows_name_the_objects(table_run: Path) -> None:
+    """Curved rows: the held-out flat runs, then every other object of the dataset."""
+    curved = metrics_of(table_run)["curved"]
+    assert ["flat", "r20", "r80"] == sorted(c["object"] for c in curved)
+    assert "held-out runs" == curved[0]["role"]
+    assert {"novel (not in training)"} == {c["role"] for c in curved[1:]}
+    table = pd.read_csv(table_run / "curved.csv")
+    assert [c["object"] for c in curved] == table["object"].tolist()
+    assert 12 == sum(c["n_trials"] for c in curved) + len(
+        metrics_of(table_run)["split"]["train"]
+    )
+
+
+def test_table1_same_config_twice_gives_identical_metrics(
+    table_run: Path, tmp_path: Path
+) -> None:
+    """Re-running the same config (in-run searches included) gives the same metrics.json."""
+    again = train(SMALL_TABLE, tmp_path / "again")
+    assert metrics_of(table_run) == metrics_of(again)
+
+
+def test_table1_searches_see_only_training_trials(
+    tmp_path: Path, search_spy: list[set[str]]
+) -> None:
+    """Each row's search gets frames of the flat training half only, never a test run."""
+    run = train(SMALL_TABLE, tmp_path / "run")
+    metrics = metrics_of(run)
+    held_out = set(metrics["split"]["test"])
+    assert len(PAPER_TABLE1) == len(search_spy)
+    for seen in search_spy:
+        assert set(metrics["split"]["train"]) == seen
+        assert set() == seen & held_out
+
+
+def test_table1_without_search_uses_the_paper_parameters(tmp_path: Path) -> None:
+    """Search off: Gaussian rows get the paper's KS / BC, linear rows fitcsvm's C = 1."""
+    run = train([*SMALL_TABLE, "task.search.n_trials=0"], tmp_path / "run")
+    for r, paper in zip(metrics_of(run)["rows"], PAPER_TABLE1, strict=True):
+        if r["kernel"] == "rbf":
+            assert "paper" == r["params_source"]
+            assert pytest.approx(paper.paper_ks) == r["params"]["kernel_scale"]
+            assert pytest.approx(paper.paper_bc) == r["params"]["C"]
+        else:
+            assert ("fitcsvm default", LINEAR_DEFAULT_C) == (
+                r["params_source"],
+                r["params"]["C"],
+            )
+
+
+# -- evaluate and run folders ----------------------------------------------------
+def test_evaluate_scores_a_fresh_dataset_without_touching_it(
+    table_run: Path, tmp_path: Path
+) -> None:
+    """evaluate writes <run>/evaluations/<name>/metrics.json and leaves the dataset as it was."""
+    cfg = _compose("train", SMALL_TABLE)
+    fresh = build_scene(cfg.scene).simulate(4, 7, progress=False)
+    folder = save_dataset(fresh, tmp_path / "fresh")
+    before = folder_state(folder)
+    out = evaluate_main(
+        _compose("evaluate", [f"run={table_run}", f"dataset={folder}", "name=fresh"])
+    )
+    assert table_run / "evaluations" / "fresh" / "metrics.json" == out
+    payload = json.loads(out.read_text())
+    assert (4, False) == (
+        payload["dataset"]["n_trials"],
+        payload["dataset"]["seen_in_training"],
+    )
+    assert 4 == sum(o["n_trials"] for o in payload["per_object"])
+    assert 0.0 <= payload["test"]["accuracy"] <= 1.0
+    assert before == folder_state(folder)
+
+
+def test_altered_model_file_is_refused(table_run: Path, tmp_path: Path) -> None:
+    """A run whose model.joblib changed after training is refused, naming the file."""
+    copy = Path(shutil.copytree(table_run, tmp_path / "run"))
+    with (copy / "model.joblib").open("ab") as fh:
+        fh.write(b"\0")
+    with pytest.raises(SlipkitError, match=r"model\.joblib.*changed after training"):
+        read_run(copy)
+
+
+def test_bad_run_path_is_a_clear_error(tmp_path: Path) -> None:
+    """evaluate run=<missing folder> raises SlipkitError naming the folder."""
+    with pytest.raises(SlipkitError, match="no such run folder"):
+        evaluate_main(
+            _compose("evaluate", [f"run={tmp_path / 'nope'}", f"dataset={tmp_path}"])
+        )
+
+
+# -- the task's own checks ---------------------------------------------------------
+def test_too_few_trials_of_the_table_object_is_refused(small_dataset: Dataset) -> None:
+    """Table I on an object with no runs names the object and the counts per object."""
+    task = TacTipTable1(objects=["r40"])
+    with pytest.raises(SlipkitError, match=r"objects=\['r40'\].*dataset\.n_trials"):
+        task.partition(small_dataset)
+
+
+def test_missing_curved_object_or_group_is_refused(small_dataset: Dataset) -> None:
+    """An absent curved object, or a dataset without the group column, is named."""
+    with pytest.raises(SlipkitError, match=r"curved_objects.*r40"):
+        TacTipTable1(curved_objects=["r40"]).partition(small_dataset)
+    with pytest.raises(SlipkitError, match="no trial group 'shape'"):
+        TacTipTable1(group="shape").partition(small_dataset)
+
+
+def test_linear_rows_search_C_only_and_are_standardised() -> None:
+    """A linear row drops gamma from the search space and fits on z-scored features."""
+    space = {"C": [0.1, 10.0, "log"], "gamma": [1e-3, 1.0, "log"]}
+    task = TacTipTable1(search={"n_trials": 2, "space": space})
+    linear = next(r for r in PAPER_TABLE1 if r.kernel == "linear")
+    gaussian = PAPER_TABLE1[0]
+    assert {"C": space["C"]} == task.row_task(linear).search["space"]  # type: ignore[index]
+    assert space == task.row_task(gaussian).search["space"]  # type: ignore[index]
+    est, source = task.row_estimator(TacTipSVM(), linear)
+    assert ("linear", True, "optuna") == (est.kernel, est.standardize, source)
+    est, _ = task.row_estimator(TacTipSVM(), gaussian)
+    assert False is est.standardize
+
+
+def test_non_svm_model_is_refused() -> None:
+    """The table needs an estimator with a kernel parameter; others get a clear error."""
+    from sklearn.linear_model import LogisticRegression
+
+    with pytest.raises(SlipkitError, match="model=tactip_svm"):
+        TacTipTable1().row_estimator(LogisticRegression(), PAPER_TABLE1[0])
+
+
+@given(st.lists(st.sampled_from(["slip", "static"]), min_size=1, max_size=50))
+def test_majority_baseline_is_the_best_constant_answer(labels: list[str]) -> None:
+    """The majority baseline equals the accuracy of the better constant prediction."""
+    y = np.asarray(labels)
+    expected = max(np.mean(y == "slip"), np.mean(y == "static"))
+    assert pytest.approx(expected) == _majority(y)
+
+
+def test_tactip_svm_same_config_twice_gives_identical_metrics(
+    svm_run: Path, tmp_path: Path
+) -> None:
+    """experiment=tactip_svm with its in-run search gives the same metrics.json twice."""
+    assert metrics_of(svm_run) == metrics_of(train(SMALL_SVM, tmp_path / "again"))
