@@ -12,6 +12,7 @@ import pandas as pd
 import pytest
 from tests.strategies import FORCE, LABELS, make_dataset
 
+from slipkit._files import sha256_file
 from slipkit.data import (
     SCHEMA_VERSION,
     Dataset,
@@ -22,7 +23,6 @@ from slipkit.data import (
     save_dataset,
 )
 from slipkit.data import io as dio
-from slipkit.data._files import sha256_file
 from slipkit.errors import DatasetError, SlipkitError
 
 

@@ -17,7 +17,7 @@ from typing import Any
 import pandas as pd
 
 from slipkit import __version__
-from slipkit.data._files import atomic_dir, sha256_file
+from slipkit._files import atomic_dir, sha256_file
 from slipkit.data.dataset import FORMAT, SCHEMA_VERSION, Dataset, LabelSpec, StreamSpec
 from slipkit.errors import DatasetError
 

@@ -47,7 +47,7 @@ from typing import Any
 import numpy as np
 import onnxruntime as ort
 
-from slipkit.runtime._files import atomic_dir, sha256_bytes, sha256_file
+from slipkit._files import atomic_dir, sha256_bytes, sha256_file
 from slipkit.runtime._schema import Fields
 from slipkit.runtime.errors import BundleError
 from slipkit.runtime.preprocessing import Pipeline

@@ -21,7 +21,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from slipkit.runtime._files import atomic_write_text
+from slipkit._files import atomic_write_text
 from slipkit.runtime.bundle import Bundle, load_bundle
 from slipkit.runtime.errors import BundleError, FrameError
 from slipkit.runtime.loop import StreamLoop

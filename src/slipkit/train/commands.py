@@ -25,7 +25,7 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig
 
 import slipkit
-from slipkit.data._files import atomic_dir
+from slipkit._files import atomic_dir
 from slipkit.data.io import load_dataset
 from slipkit.errors import SlipkitError
 from slipkit.train.data import training_dataset

@@ -26,7 +26,7 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
-from slipkit.data._files import atomic_write_text, sha256_file
+from slipkit._files import atomic_write_text, sha256_file
 from slipkit.errors import SlipkitError
 
 RUN_FORMAT = "slipkit-run"

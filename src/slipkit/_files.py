@@ -1,9 +1,9 @@
-"""Checksums and all-or-nothing writes for bundles and summaries.
+"""Checksums and all-or-nothing writes, shared by datasets, run folders and bundles.
 
-A copy of the two primitives in ``slipkit.data._files`` rather than an import: that
-package's ``__init__`` loads pandas and pyarrow, which a gripper PC does not have.
-The standard library has everything needed (``os.replace`` is atomic within one
-filesystem; ``hashlib``).
+Standard library only (plus :mod:`slipkit.errors`), so the gripper-PC runtime can use it
+without pandas or pyarrow. Written by hand because the standard library already has the
+two primitives that matter (``os.replace`` is atomic within one filesystem, ``hashlib``);
+a dependency would add nothing.
 """
 
 from __future__ import annotations
@@ -15,6 +15,8 @@ import shutil
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
+
+from slipkit.errors import SlipkitError
 
 
 def sha256_bytes(data: bytes) -> str:
@@ -32,16 +34,19 @@ def sha256_file(path: Path, chunk: int = 1 << 20) -> str:
 
 
 @contextlib.contextmanager
-def atomic_dir(target: Path, *, overwrite: bool) -> Iterator[Path]:
+def atomic_dir(target: Path | str, *, overwrite: bool = False) -> Iterator[Path]:
     """Yield a temporary sibling folder that becomes ``target`` only on success.
 
-    The sibling lives on the same filesystem, so the final ``os.replace`` is atomic:
-    a reader (or a gripper PC syncing the folder) never sees half a bundle. If the
-    body raises, ``target`` is untouched and the temporary folder is removed.
-    ``FileExistsError`` when ``target`` exists and ``overwrite`` is False.
+    The folder is created beside ``target`` (same filesystem, so the final rename
+    is atomic). If the body raises, or the process dies, ``target`` is untouched:
+    a reader never sees a half-written folder under the final name. Leftover
+    ``.<name>.tmp-*`` folders from a killed process are never taken as complete.
     """
+    target = Path(target)
     if target.exists() and not overwrite:
-        raise FileExistsError(f"{target}: already exists (pass overwrite=True)")
+        raise SlipkitError(
+            f"{target}: already exists (pass overwrite=true to replace it)"
+        )
     target.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
     try:
@@ -60,8 +65,9 @@ def atomic_dir(target: Path, *, overwrite: bool) -> Iterator[Path]:
         raise
 
 
-def atomic_write_text(path: Path, text: str) -> None:
+def atomic_write_text(path: Path | str, text: str) -> None:
     """Write ``text`` to ``path`` through a temporary file and a rename."""
+    path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.tmp-", dir=path.parent)
     try:
