@@ -16,7 +16,8 @@ the gripper-PC runtime only loads the resulting ``.onnx`` files.
 
 from __future__ import annotations
 
-from slipkit.export import sklearn as _sklearn  # noqa: F401  (registers exporters)
+from slipkit.export import detectors as _detectors  # noqa: F401  (registers exporters)
+from slipkit.export import sklearn as _sklearn  # noqa: F401
 from slipkit.export import svm as _svm  # noqa: F401
 from slipkit.export import torch as _torch  # noqa: F401
 from slipkit.export.parity import check_parity
