@@ -6,7 +6,7 @@ import functools
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from sklearn.datasets import make_classification
 
@@ -223,6 +223,7 @@ def test_in_graph_features_equal_velocity_features(
         st.tuples(st.floats(-10, 10), st.floats(-10, 10)), min_size=1, max_size=8
     )
 )
+@example(dxy=[(0.0, 5e-324), (1.0, 1.0)])  # a subnormal velocity (found by Hypothesis)
 def test_shifted_angle_is_atan2_of_cross_and_dot_with_the_mean_direction(dxy):
     """wrap(theta - circular mean) == atan2(m x v, m . v) with m the sum of unit velocities."""
     v = np.asarray(dxy, dtype=np.float64)
@@ -234,7 +235,11 @@ def test_shifted_angle_is_atan2_of_cross_and_dot_with_the_mean_direction(dxy):
     c, s = u.sum(axis=0) if has.any() else (0.0, 0.0)
     if np.hypot(c, s) / max(int(has.sum()), 1) <= 1e-9:
         c, s = 1.0, 0.0
-    via_cross = np.arctan2(c * v[:, 1] - s * v[:, 0], c * v[:, 0] + s * v[:, 1])
+    unit = np.zeros_like(v)
+    unit[has] = u  # scale-free: a subnormal velocity keeps its direction
+    via_cross = np.arctan2(
+        c * unit[:, 1] - s * unit[:, 0], c * unit[:, 0] + s * unit[:, 1]
+    )
     assert 1e-9 >= _circular(shifted[has] - via_cross[has]).max(initial=0.0)
 
 

@@ -160,8 +160,9 @@ def velocity_feature_nodes(
             one = g.const(1.0, np.float64)
             inv = g.op("Div", one, g.op("Where", has_angle, dr, one))
             # Pins without an angle have dx = dy = 0, so they add nothing to C and S.
-            c = g.op("ReduceSum", g.op("Mul", dx, inv), axis1, keepdims=1)
-            s = g.op("ReduceSum", g.op("Mul", dy, inv), axis1, keepdims=1)
+            ux, uy = g.op("Mul", dx, inv), g.op("Mul", dy, inv)
+            c = g.op("ReduceSum", ux, axis1, keepdims=1)
+            s = g.op("ReduceSum", uy, axis1, keepdims=1)
             count = g.op(
                 "ReduceSum", g.op("Cast", has_angle, to=DOUBLE), axis1, keepdims=1
             )
@@ -173,8 +174,10 @@ def velocity_feature_nodes(
             directed = g.op("Greater", resultant, g.const(RESULTANT_EPS, np.float64))
             mc = g.op("Where", directed, c, one)
             ms = g.op("Where", directed, s, zero)
-            cross = g.op("Sub", g.op("Mul", mc, dy), g.op("Mul", ms, dx))
-            dot = g.op("Add", g.op("Mul", mc, dx), g.op("Mul", ms, dy))
+            # Unit vectors, not raw velocities: the angle is scale-free, and tiny
+            # velocities would otherwise lose their direction to underflow in the products.
+            cross = g.op("Sub", g.op("Mul", mc, uy), g.op("Mul", ms, ux))
+            dot = g.op("Add", g.op("Mul", mc, ux), g.op("Mul", ms, uy))
             theta = _atan2(g, cross, dot, zero_sign=False)
         else:
             theta = _atan2(g, dy, dx, zero_sign=True)
