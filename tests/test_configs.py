@@ -19,6 +19,7 @@ GROUP_PRIMARY = {
     "task": "train",
     "detector": "train",
     "experiment": "train",
+    "deploy": "export",
 }
 PRIMARY = sorted(p.stem for p in CONFIGS.glob("*.yaml"))
 GROUP_FILES = sorted(

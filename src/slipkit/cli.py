@@ -38,6 +38,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "slipkit.train.commands:evaluate_main",
         "score a run on a dataset it was not trained on (run=... dataset=...)",
     ),
+    "export": (
+        "slipkit.export.commands:export_main",
+        "write an ONNX bundle of a trained run (run=... out=exports/<name>)",
+    ),
 }
 
 

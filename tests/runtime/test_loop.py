@@ -9,7 +9,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
-from tests.runtime.helpers import LinearCase, frames, linear_graph, manifest, windows
+from tests.runtime.helpers import (
+    RATE_HZ,
+    LinearCase,
+    frames,
+    linear_graph,
+    manifest,
+    windows,
+)
 
 from slipkit.features.pins import pin_velocities, velocity_features
 from slipkit.models.online import debounce
@@ -105,7 +112,7 @@ def test_ring_buffer_windows_equal_sliding_window_view(
     expected = windows(x.astype(np.float64), window)
     decided = []
     for i, row in enumerate(x):
-        out = loop.step(row, float(i))
+        out = loop.step(row, i / RATE_HZ)
         if i >= window - 1:
             np.testing.assert_array_equal(expected[i - window + 1], loop.window())
         if out is not None:
@@ -131,7 +138,7 @@ def test_argmax_rule_decides_positive_class(tmp_path: Path) -> None:
     write_bundle(tmp_path / "b", linear_graph(w, [0.0, 0.2]), man)
     x = frames(60, seed=4)
     result = StreamLoop(load_bundle(tmp_path / "b")).run(
-        ReplaySource(x, np.arange(60.0))
+        ReplaySource(x, np.arange(60) / RATE_HZ)
     )
     logits = windows(x.astype(np.float64), 4).reshape(57, 12) @ w + [0.0, 0.2]
     np.testing.assert_array_equal(logits.argmax(axis=1) == 0, result.slip)
@@ -189,10 +196,10 @@ def test_latency_summary_counts_frames_over_budget() -> None:
 def test_latency_is_measured_from_arrival(case: LinearCase) -> None:
     """An arrival stamp given by the source is where the latency clock starts."""
     loop = StreamLoop(load_bundle(case.path))
-    for row in case.frames[:3]:
-        loop.step(row, 0.0, arrival_ns=0)
+    for i, row in enumerate(case.frames[:3]):
+        loop.step(row, case.timestamps[i], arrival_ns=0)
     loop.step(
-        case.frames[3], 0.0, arrival_ns=0
+        case.frames[3], case.timestamps[3], arrival_ns=0
     )  # "arrived" at perf_counter 0: huge latency
     assert loop.result().latency_ns[0] > 1_000_000  # perf_counter_ns is far past 0
 

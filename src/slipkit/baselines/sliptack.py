@@ -29,6 +29,7 @@ saturation, a NaN sample in the window) is NaN, never ``inf`` and never an excep
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Sequence
 from numbers import Integral, Real
@@ -39,7 +40,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike, NDArray
 from scipy.ndimage import uniform_filter1d
 from scipy.optimize import minimize_scalar
-from scipy.signal import butter, find_peaks, sosfilt
+from scipy.signal import butter, find_peaks, sosfilt, sosfilt_zi
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.linear_model import LinearRegression
 from sklearn.utils._param_validation import Interval, StrOptions
@@ -789,12 +790,23 @@ class TorsionalSlipDetector(StreamDetector):
         )
 
     def _scores(self, X: FloatArray) -> FloatArray:
-        x = np.nan_to_num(X[:, 0])  # a dropped sample counts as zero deflection change
-        band = sosfilt(self._sos(), x)
+        x = X[:, 0]
         out = np.full(len(x), -np.inf)
+        finite = np.isfinite(x)
+        if not finite.any():
+            return out
+        f = int(np.argmax(finite))
+        xs = x[f:]
+        # A dropped (NaN) sample holds the last deflection: no change, no band energy.
+        # (Zero would be a step from the resting deflection to 0 mm and ring the filter.)
+        xs = xs[np.maximum.accumulate(np.where(np.isfinite(xs), np.arange(len(xs)), 0))]
+        sos = self._sos()
+        # Start in the steady state of the first sample: a nib resting at any
+        # deflection has no 10 Hz content, so the filter must not ring at start-up.
+        band, _ = sosfilt(sos, xs, zi=sosfilt_zi(sos) * xs[0])
         k = int(self.window)
-        if len(x) >= k:
-            out[k - 1 :] = np.sqrt(sliding_window_view(band * band, k).mean(axis=1))
+        if len(xs) >= k:
+            out[f + k - 1 :] = np.sqrt(sliding_window_view(band * band, k).mean(axis=1))
         return out
 
     def _new_stream(self) -> DetectorStream:
@@ -808,11 +820,19 @@ class _BandStream:
         self.reset()
 
     def reset(self) -> None:
-        self.zi = np.zeros((self.sos.shape[0], 2))
+        self.zi: FloatArray | None = None  # set by the first finite sample
+        self.last = math.nan
         self.buf: deque[float] = deque(maxlen=int(self.det.window))
 
     def update(self, sample: ArrayLike) -> tuple[float, bool]:
-        x = float(np.nan_to_num(np.asarray(sample, dtype=np.float64).reshape(-1)[0]))
+        x = float(np.asarray(sample, dtype=np.float64).reshape(-1)[0])
+        if not math.isfinite(x):  # dropped: hold the last deflection, as the batch form
+            if self.zi is None:
+                return -np.inf, False
+            x = self.last
+        if self.zi is None:
+            self.zi = sosfilt_zi(self.sos) * x
+        self.last = x
         y, self.zi = sosfilt(self.sos, [x], zi=self.zi)
         self.buf.append(float(y[0]) ** 2)
         k = int(self.det.window)

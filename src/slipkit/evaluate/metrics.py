@@ -64,7 +64,9 @@ def regression_metrics(
         yt, yp = yt.T, yp.T
     mse = np.asarray(mean_squared_error(yt, yp, multioutput="raw_values"))
     var = yt.var(axis=0)
-    smse = np.divide(mse, var, out=np.full_like(mse, np.nan), where=var > 0)
+    # np.var of a constant can be round-off (0.1 x 1000 -> 1.9e-34), not 0: test the range.
+    varies = (var > 0) & (np.ptp(yt, axis=0) > 0)
+    smse = np.divide(mse, var, out=np.full_like(mse, np.nan), where=varies)
     return {
         "n": int(yt.shape[0]),
         "rmse": {n: float(v) for n, v in zip(names, np.sqrt(mse), strict=True)},

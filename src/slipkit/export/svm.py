@@ -82,7 +82,10 @@ def _rbf_nodes(g: GraphBuilder, x: str, estimator: TacTipSVM) -> str:
     cross = g.op(
         "Gemm", z, g.const(2.0 * s.T), g.const(-np.sum(s * s, axis=1)), stem="cross"
     )
-    kernel = g.op("Exp", g.op("Sub", cross, zz), stem="kernel")
+    # -gamma ||x - sv||^2 <= 0: clamp the expanded form, whose float32 round-off can go
+    # slightly positive at a support vector and push the kernel above 1.
+    exponent = g.op("Min", g.op("Sub", cross, zz), g.const(np.zeros(1)))
+    kernel = g.op("Exp", exponent, stem="kernel")
     dual = np.asarray(svc.dual_coef_, dtype=np.float64).reshape(1, -1)
     return g.op(
         "Gemm",

@@ -382,3 +382,15 @@ def _register_skorch() -> None:
 
 
 _register_skorch()
+
+
+def _register_slipkit_nets() -> None:
+    """slipkit's skorch-based estimators keep ``module_`` + scalers (not NeuralNet subclasses)."""
+    from slipkit.models.force import ForceMLP
+    from slipkit.models.window import WindowCNN, WindowMLP
+
+    for cls in (ForceMLP, WindowMLP, WindowCNN):
+        register_exporter(cls, export_skorch_estimator)
+
+
+_register_slipkit_nets()

@@ -112,6 +112,13 @@ def _summary_lines(summary: dict[str, Any], source: str) -> list[str]:
         f"{s['slip_decisions']} slip, {s['declared']} declared (debounce k={s['debounce_k']})"
         + (f", first declared at {first:.4f} s" if first is not None else "")
     ]
+    reasons = ", ".join(f"{k} {v}" for k, v in s["bad_by_reason"].items() if v)
+    lines.append(
+        f"flagged: {s['bad_frames']} bad frames"
+        + (f" ({reasons})" if reasons else "")
+        + f", {s['gaps']} gaps, {s['skipped_windows']} windows skipped"
+        + f" ({s['nonfinite_windows']} with a non-finite input or score)"
+    )
     lat, budget = s["latency_ms"], s["budget_ms"]
     if lat is not None:
         lines.append(

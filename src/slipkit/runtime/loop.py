@@ -18,6 +18,49 @@ buffer, so the latest window is always the contiguous slice ``ring[j : j + windo
 (oldest frame first): O(1) per frame and no copy to hand the window to numpy or
 onnxruntime. (``collections.deque`` or ``np.roll`` would cost a copy of the whole
 window per frame.)
+
+Bad frames
+----------
+A live stream must not stop on one bad frame, and a bad frame must not be scored as if
+it were good. :meth:`StreamLoop.step` checks every frame and *flags* (never raises on)
+one that is bad for one of these reasons (:data:`BAD_REASONS`):
+
+``dtype``
+    values that are not real numbers (strings, objects, complex, bool);
+``shape``
+    values whose shape is not the manifest's ``frame.shape`` (or a ragged list);
+``nonfinite``
+    a NaN or an infinity among the values (only an infinity for streams whose NaN
+    means "missing", :data:`NAN_IS_MISSING_STREAMS`: a TacTip pin the camera lost is
+    NaN in x and y, and the pin features treat it as absent);
+``timestamp``
+    a timestamp that is NaN, infinite or not a number;
+``duplicate_time``
+    the same timestamp as the previous frame (dt = 0);
+``time_order``
+    a timestamp before the previous frame's (out of order, or the clock went back).
+
+A flagged frame still takes its place in the stream (a shape or dtype fault is stored
+as NaN), so every window that contains it is *skipped*: no model call, no decision
+record, and the debounce run restarts (slip is declared only on ``k`` consecutive
+*valid* slip decisions). A *gap*, a timestamp more than ``max_gap_periods`` frame
+periods after the previous one (dropped frames), is not a bad frame: it is counted,
+and its windows are scored as the offline features score windows across dropped
+frames (frame by frame), unless ``skip_gaps=True`` skips the windows holding frames
+from both sides of it. Jitter (any dt in ``(0, max_gap_periods / rate_hz]``) is
+accepted. Time is compared with the previous frame's finite timestamp, so one
+glitched timestamp flags at most one frame (and counts at most one gap), and a
+clock that restarts flags a single frame. A window whose graph input (float32, after
+preprocessing) or score is NaN or infinite - finite frames can still overflow
+float32 - is skipped and counted as well (numpy warns once about the cast). The
+counts, the flagged frames with their reasons and the skipped windows are in
+:class:`LoopResult` and its :meth:`~LoopResult.summary`.
+
+The check costs one ``np.isfinite`` (``np.isinf`` where NaN means missing) into a
+preallocated buffer, a shape and dtype comparison and one subtraction per frame, and
+the same value check on the graph input per decision; only a bad frame takes the
+slower path that names the reason. ``benchmarks/bench_runtime_loop.py`` measures the
+loop's per-frame latency with these checks in place.
 """
 
 from __future__ import annotations
@@ -25,7 +68,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -34,6 +77,19 @@ from numpy.typing import ArrayLike, NDArray
 
 from slipkit.runtime.bundle import Budget, Bundle
 from slipkit.runtime.sources import Frame
+
+#: Streams whose NaN values are data ("not detected"), not faults: the TacTip pins.
+NAN_IS_MISSING_STREAMS = frozenset({"pins"})
+
+#: Why a frame was flagged (see the module docstring), in the order they are checked.
+BAD_REASONS = (
+    "dtype",
+    "shape",
+    "nonfinite",
+    "timestamp",
+    "duplicate_time",
+    "time_order",
+)
 
 
 @dataclass(frozen=True)
@@ -63,6 +119,17 @@ class LoopResult:
         The debounce ``k``.
     budget : Budget
         The bundle's latency budget.
+    bad_frame : ndarray of int64
+        Stream positions of the flagged frames, in order.
+    bad_reason : tuple of str
+        Why each was flagged (one of :data:`BAD_REASONS`).
+    skipped_windows : int
+        Windows due for a decision but not scored: they held a flagged frame,
+        spanned a gap (``skip_gaps``), or their graph input or score was not finite.
+    nonfinite_windows : int
+        Of those, windows whose graph input or score came out NaN or infinite.
+    gaps : int
+        Timestamps more than ``max_gap_periods`` frame periods after the previous one.
     """
 
     frame: NDArray[np.int64]
@@ -75,12 +142,36 @@ class LoopResult:
     name: str
     debounce_k: int
     budget: Budget
+    bad_frame: NDArray[np.int64] = field(
+        default_factory=lambda: np.zeros(0, dtype=np.int64)
+    )
+    bad_reason: tuple[str, ...] = ()
+    skipped_windows: int = 0
+    nonfinite_windows: int = 0
+    gaps: int = 0
+
+    def bad_counts(self) -> dict[str, int]:
+        """Flagged frames per reason (every reason of :data:`BAD_REASONS`, zeros included)."""
+        counts = dict.fromkeys(BAD_REASONS, 0)
+        for reason in self.bad_reason:
+            counts[reason] += 1
+        return counts
 
     def summary(self) -> dict[str, Any]:
-        """Counts and latency percentiles, ms, against the budget (JSON-ready)."""
+        """Counts and latency percentiles, ms, against the budget (JSON-ready).
+
+        ``decisions`` counts the valid (scored) windows; ``bad_frames``,
+        ``bad_by_reason``, ``skipped_windows``, ``nonfinite_windows`` and ``gaps`` count
+        what the loop flagged (module docstring, *Bad frames*).
+        """
         return {
             "bundle": self.name,
             "frames": self.n_frames,
+            "bad_frames": len(self.bad_reason),
+            "bad_by_reason": self.bad_counts(),
+            "skipped_windows": self.skipped_windows,
+            "nonfinite_windows": self.nonfinite_windows,
+            "gaps": self.gaps,
             "decisions": len(self.slip),
             "slip_decisions": int(self.slip.sum()),
             "declared": int(self.declared.sum()),
@@ -134,22 +225,63 @@ class StreamLoop:
         binding saved about 1.4 us per call on this machine (``docs/deploy.md``).
     capacity : int
         Initial number of decision records (grows by doubling).
+    max_gap_periods : float
+        A timestamp more than this many frame periods (``1 / frame.rate_hz``, s)
+        after the previous one is a gap (dropped frames), counted in the result.
+        The default 1.5 accepts any jitter below half a period and catches one
+        dropped frame.
+    skip_gaps : bool
+        Also skip the windows that span a gap (default False: score them, as the
+        offline features do).
+    nan_is_missing : bool, optional
+        Let NaN values through (only infinities are flagged) because the bundle's
+        preprocessing or graph reads NaN as "missing". Default: True when every
+        stream of ``frame.streams`` is in :data:`NAN_IS_MISSING_STREAMS`.
 
     Attributes
     ----------
     n_frames : int
         Frames pushed since construction or :meth:`reset`.
+    n_bad : int
+        Frames flagged since construction or :meth:`reset`.
+    last_bad : str or None
+        Why the latest frame was flagged (:data:`BAD_REASONS`); None when it was good.
     """
 
     def __init__(
-        self, bundle: Bundle, *, io_binding: bool = True, capacity: int = 1024
+        self,
+        bundle: Bundle,
+        *,
+        io_binding: bool = True,
+        capacity: int = 1024,
+        max_gap_periods: float = 1.5,
+        skip_gaps: bool = False,
+        nan_is_missing: bool | None = None,
     ) -> None:
+        if not (isinstance(max_gap_periods, int | float) and max_gap_periods > 1.0):
+            raise ValueError(
+                f"max_gap_periods must be a number above 1 (frame periods); got {max_gap_periods!r}"
+            )
         m = bundle.manifest
         self.bundle = bundle
         self._w = m.frame.window
         self._hop = m.frame.hop
         self._k = m.debounce_k
+        self._shape = tuple(m.frame.shape)
+        self._max_dt = float(max_gap_periods) / m.frame.rate_hz
+        self._skip_gaps = bool(skip_gaps)
         self._ring = np.zeros((2 * self._w, *m.frame.shape))
+        if nan_is_missing is None:
+            nan_is_missing = bool(m.frame.streams) and (
+                set(m.frame.streams) <= NAN_IS_MISSING_STREAMS
+            )
+        self.nan_is_missing = bool(nan_is_missing)
+        # The value check writes into a preallocated bool buffer, then looks for one
+        # byte: isfinite -> a False (0) is bad; with NaN as "missing", isinf -> a
+        # True (1) is bad.
+        self._check = np.isinf if self.nan_is_missing else np.isfinite
+        self._bad_byte = b"\x01" if self.nan_is_missing else b"\x00"
+        self._finite = np.zeros(m.frame.shape, dtype=bool)
         self._windows = [self._ring[j : j + self._w] for j in range(self._w)]
         self._ops = list(bundle.preprocessing.ops)
         (inp,) = m.inputs
@@ -159,6 +291,7 @@ class StreamLoop:
         # The graph input seen in the preprocessing's output shape (same values, a
         # view): writing the window into it needs no reshape per frame.
         self._input_view = self._input.reshape(bundle.preprocessing.out_shape)
+        self._input_finite = np.zeros(self._input.shape, dtype=bool)
         self._feed = {inp.name: self._input}
         d = m.decision
         self._out_names = [d.output]
@@ -186,12 +319,25 @@ class StreamLoop:
         self.reset()
 
     def reset(self) -> None:
-        """Forget the window, the debounce state and the records."""
+        """Forget the window, the debounce state, the records and any op state (e.g. a baseline)."""
+        for op in self._ops:
+            getattr(op, "reset", lambda: None)()
         self._ring[...] = 0.0
         self._pos = 0
         self.n_frames = 0
         self._run = 0
         self._n = 0
+        self._prev_ts = math.nan
+        # Windows completed by frames before this (1-based) count hold a flagged
+        # frame or span a gap and are skipped.
+        self._clean_from = 0
+        self.n_bad = 0
+        self.last_bad: str | None = None
+        self._bad_frame: list[int] = []
+        self._bad_reason: list[str] = []
+        self._skipped = 0
+        self._nonfinite_windows = 0
+        self._gaps = 0
         cap = self._capacity
         self._frame = np.zeros(cap, dtype=np.int64)
         self._ts = np.zeros(cap)
@@ -221,17 +367,22 @@ class StreamLoop:
     def step(
         self,
         values: ArrayLike,
-        timestamp: float = math.nan,
+        timestamp: float | None = None,
         arrival_ns: int | None = None,
     ) -> bool | None:
-        """Push one frame; decide when a window is complete and the hop is due.
+        """Push one frame; decide when a window is complete, valid and the hop is due.
+
+        Never raises on a bad frame: it is flagged (:attr:`last_bad`, counted in
+        :attr:`n_bad` and the result) and the windows holding it are skipped
+        (module docstring, *Bad frames*).
 
         Parameters
         ----------
         values : array_like of shape frame.shape
-            The frame, in the manifest's channel order.
-        timestamp : float
-            Its sensor time, s (recorded with the decision).
+            The frame, in the manifest's channel order (real numbers).
+        timestamp : float, optional
+            Its sensor time, s (recorded with the decision, and checked: finite,
+            after the previous frame's, gaps noted). None skips the time checks.
         arrival_ns : int, optional
             :func:`time.perf_counter_ns` at arrival; now when omitted.
 
@@ -239,31 +390,73 @@ class StreamLoop:
         -------
         bool or None
             Whether slip is declared (debounced) on this frame; None when no
-            decision was made (window still filling, or between hops).
+            decision was made (window still filling, between hops, or a skipped
+            window).
         """
         t0 = time.perf_counter_ns() if arrival_ns is None else arrival_ns
         w = self._w
         p = self._pos
         ring = self._ring
-        ring[p] = values
-        ring[p + w] = values
+        seen = self.n_frames = self.n_frames + 1
+        bad: str | None = None
+        if (
+            type(values) is np.ndarray
+            and values.shape == self._shape
+            and values.dtype.kind in "fiu"
+        ):
+            ring[p] = values
+            ring[p + w] = values
+            self._check(ring[p], out=self._finite)
+            # A bytes search is the cheapest exact any/all on a small bool array.
+            if self._bad_byte in self._finite.tobytes():
+                bad = "nonfinite"
+        else:
+            bad = self._store_odd(values, p)
+        if timestamp is not None:
+            try:
+                dt = timestamp - self._prev_ts
+                in_step = 0.0 < dt <= self._max_dt
+            except TypeError:  # not a number; named by the slow path
+                dt, in_step = math.nan, False
+            if in_step:
+                self._prev_ts = timestamp
+            else:
+                bad = self._check_time(timestamp, dt, seen, bad)
+        self.last_bad = bad
+        if bad is not None:
+            self._flag(seen, bad)
         p += 1
         if p == w:
             p = 0
         self._pos = p
-        seen = self.n_frames = self.n_frames + 1
         if seen < w or (seen - w) % self._hop:
+            return None
+        if seen < self._clean_from:
+            self._skipped += 1
+            self._run = 0
             return None
         x = self._windows[p]
         for op in self._ops:
             x = op(x)
         self._input_view[...] = x
+        self._check(self._input, out=self._input_finite)
+        if self._bad_byte in self._input_finite.tobytes():
+            # A finite frame can still overflow float32 after preprocessing (or an
+            # op can make a NaN); a graph fed an infinity can return a finite but
+            # meaningless score (exp(-inf) = 0 in an RBF kernel), so skip it here.
+            self._skip_nonfinite()
+            return None
         if self._binding is None:
             score = self._session.run(self._out_names, self._feed)[0]
         else:
             self._session.run_with_iobinding(self._binding)
             score = self._out
         s = float(score.flat[self._col])
+        if not math.isfinite(s):
+            # NaN compares False with any threshold: scoring it would read as a
+            # silent "no slip". An overflow inside the graph is skipped instead.
+            self._skip_nonfinite()
+            return None
         if self._argmax:
             slip = int(score.argmax()) == self._col
         else:
@@ -276,13 +469,76 @@ class StreamLoop:
         if i == len(self._lat):
             self._grow()
         self._frame[i] = seen - 1
-        self._ts[i] = timestamp
+        self._ts[i] = math.nan if timestamp is None else timestamp
         self._score[i] = s
         self._slip[i] = slip
         self._decl[i] = declared
         self._lat[i] = t1 - t0
         self._n = i + 1
         return declared
+
+    def _store_odd(self, values: Any, p: int) -> str | None:
+        """Store a frame that is not an ndarray of the frame shape; name its fault.
+
+        The slow path: a list (or other sequence) of the right shape and a real
+        dtype is stored like an array; anything else is stored as NaN so no window
+        holding it can look valid.
+        """
+        w, ring = self._w, self._ring
+        try:
+            arr = np.asarray(values)
+        except (ValueError, TypeError):  # ragged nesting
+            arr = None
+        if arr is None:
+            bad = "shape"
+        elif arr.dtype.kind not in "fiu":
+            bad = "dtype"
+        elif arr.shape != self._shape:
+            bad = "shape"
+        else:
+            ring[p] = arr
+            ring[p + w] = arr
+            self._check(ring[p], out=self._finite)
+            return "nonfinite" if self._bad_byte in self._finite.tobytes() else None
+        ring[p] = math.nan
+        ring[p + w] = math.nan
+        return bad
+
+    def _check_time(
+        self, timestamp: float, dt: float, seen: int, bad: str | None
+    ) -> str | None:
+        """The slow path of the time check: first frame, a fault, or a gap."""
+        if not (
+            isinstance(timestamp, int | float | np.integer | np.floating)
+            and math.isfinite(timestamp)
+        ):
+            return bad or "timestamp"
+        prev = self._prev_ts
+        self._prev_ts = timestamp
+        if math.isnan(prev):  # the first timed frame
+            return bad
+        if dt == 0.0:
+            return bad or "duplicate_time"
+        if dt < 0.0:
+            return bad or "time_order"
+        self._gaps += 1
+        if self._skip_gaps:
+            # Windows holding the frames on both sides of the gap: the ones ending
+            # here and at the next window - 2 frames.
+            self._clean_from = max(self._clean_from, seen + self._w - 1)
+        return bad
+
+    def _skip_nonfinite(self) -> None:
+        self._skipped += 1
+        self._nonfinite_windows += 1
+        self._run = 0
+
+    def _flag(self, seen: int, reason: str) -> None:
+        self.n_bad += 1
+        self._bad_frame.append(seen - 1)
+        self._bad_reason.append(reason)
+        # Windows ending at this frame and the next window - 1 frames hold it.
+        self._clean_from = max(self._clean_from, seen + self._w)
 
     def run(self, source: Iterable[Frame]) -> LoopResult:
         """Push every frame of a source (replay or UDP) and return the result."""
@@ -306,4 +562,9 @@ class StreamLoop:
             name=m.name,
             debounce_k=m.debounce_k,
             budget=m.budget,
+            bad_frame=np.array(self._bad_frame, dtype=np.int64),
+            bad_reason=tuple(self._bad_reason),
+            skipped_windows=self._skipped,
+            nonfinite_windows=self._nonfinite_windows,
+            gaps=self._gaps,
         )

@@ -28,6 +28,17 @@ op                           parameters, effect
                              frames ``(w, 2N)`` (x block, y block, mm) ->
                              :func:`slipkit.features.pins.velocity_features` of
                              consecutive differences, ``(w - 1, F)``
+``subtract``                 ``value`` (list broadcasting against the trailing
+                             axes): ``x - value`` in float64 (e.g. a fixed
+                             reference frame, so small offsets survive the
+                             float32 cast of the graph input)
+``subtract_first``           none: ``x - x[0]`` (each window minus its own first
+                             frame)
+``baseline_first``           ``frames`` (int >= 1), ``hop`` (int >= 1, the frame
+                             hop): ``x`` minus the median of the first ``frames``
+                             frames of the *stream* (stateful: collected from the
+                             windows as they arrive; until ``frames`` frames have
+                             arrived, the median of those that have)
 ===========================  =====================================================
 """
 
@@ -217,6 +228,85 @@ def _pin_velocity_features(f: Fields, in_shape: tuple[int, ...]) -> Op:
         "missing_count": f.boolean("missing_count", False),
     }
     return _PinVelocityFeatures(velocity_features, kwargs, in_shape)
+
+
+class _Subtract:
+    def __init__(self, value: Array, in_shape: tuple[int, ...]) -> None:
+        # Broadcast once (see _Standardize).
+        self.value = np.ascontiguousarray(np.broadcast_to(value, in_shape))
+        self.out_shape = in_shape
+        self._buf = np.empty(in_shape)
+
+    def __call__(self, x: Array) -> Array:
+        np.subtract(x, self.value, self._buf)
+        return self._buf
+
+
+@register_op("subtract")
+def _subtract(f: Fields, in_shape: tuple[int, ...]) -> Op:
+    f.only(("op", "value"))
+    return _Subtract(_broadcast_param(f, "value", in_shape), in_shape)
+
+
+class _SubtractFirst:
+    def __init__(self, in_shape: tuple[int, ...]) -> None:
+        self.out_shape = in_shape
+        self._buf = np.empty(in_shape)
+
+    def __call__(self, x: Array) -> Array:
+        np.subtract(x, x[0], self._buf)
+        return self._buf
+
+
+@register_op("subtract_first")
+def _subtract_first(f: Fields, in_shape: tuple[int, ...]) -> Op:
+    f.only(("op",))
+    return _SubtractFirst(in_shape)
+
+
+class _BaselineFirst:
+    """``x`` minus the median of the stream's first ``n`` frames (state across calls).
+
+    The first call sees a full window (stream frames ``0 .. w-1``); each later call
+    adds the last ``hop`` rows of its window. Frames are collected until ``n`` have
+    arrived; before that the baseline is the median of those seen so far, so a
+    decision never waits for the baseline (training computed it from the trial's
+    first ``n`` frames, future ones included: only the first ``n - 1`` frames of a
+    stream can differ).
+    """
+
+    def __init__(self, n: int, hop: int, in_shape: tuple[int, ...]) -> None:
+        self.n = n
+        self.hop = hop
+        self.out_shape = in_shape
+        self._buf = np.empty(in_shape)
+        self._seen = np.empty((n, *in_shape[1:]))
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the baseline (a new stream, e.g. the next grasp)."""
+        self._count = 0
+        self._started = False
+        self._base = np.zeros(self.out_shape[1:])
+
+    def __call__(self, x: Array) -> Array:
+        if self._count < self.n:
+            new = x if not self._started else x[max(len(x) - self.hop, 0) :]
+            self._started = True
+            take = min(self.n - self._count, len(new))
+            self._seen[self._count : self._count + take] = new[:take]
+            self._count += take
+            self._base = np.median(self._seen[: self._count], axis=0)
+        np.subtract(x, self._base, self._buf)
+        return self._buf
+
+
+@register_op("baseline_first")
+def _baseline_first(f: Fields, in_shape: tuple[int, ...]) -> Op:
+    f.only(("op", "frames", "hop"))
+    return _BaselineFirst(
+        f.integer("frames", minimum=1), f.integer("hop", 1, minimum=1), in_shape
+    )
 
 
 class Pipeline:

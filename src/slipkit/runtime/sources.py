@@ -36,6 +36,7 @@ import math
 import socket
 import struct
 import time
+import zipfile
 from collections.abc import Iterator
 from pathlib import Path
 from types import TracebackType
@@ -180,8 +181,15 @@ def load_replay(
                 raise FrameError(
                     where, f"has no 'frames' array; arrays: {loaded.files}"
                 )
-            frames = loaded["frames"]
-            times = loaded["timestamps"] if "timestamps" in loaded.files else None
+            try:
+                # An .npz reads its arrays lazily: an object array (which needs
+                # pickle) or a damaged member only fails here, not in np.load.
+                frames = loaded["frames"]
+                times = loaded["timestamps"] if "timestamps" in loaded.files else None
+            except (OSError, ValueError, zipfile.BadZipFile) as exc:
+                raise FrameError(
+                    where, f"not a numpy .npz/.npy file without pickles: {exc}"
+                ) from None
     else:
         frames, times = loaded, None
     if times is None:

@@ -1,0 +1,468 @@
+"""Exported models side by side: the slipkit loop, the bare onnxruntime call, the native model, the floor.
+
+Trains one run per learned family (``slipkit.train.commands.train_main``), exports
+each with ``slipkit export`` (``export_main``: parity checked, session options
+measured), then measures in one process, batch 1, one thread, rounds interleaved:
+
+* **loop**: :class:`slipkit.runtime.StreamLoop` on the bundle's replay frames, frame
+  arrival to decision (ring buffer + preprocessing + onnxruntime + rule + debounce);
+* **bare**: one ``run_with_iobinding`` call on precomputed graph inputs (the loop's
+  own call path);
+* **native**: the Python estimator's score method (sklearn / skorch / torch) on one
+  frame's model input (for TacTip: the numpy pin-velocity features, then
+  ``decision_function``);
+* **floor**: the best of onnxruntime's per-call floor (an Identity graph of the same
+  input) + the graph's FLOPs at this CPU's measured single-thread numpy matmul rate,
+  and, for the TacTip SVM, hand-written numpy matrix products on the features.
+
+Prints a markdown table (us per frame, medians over rounds of each round's
+percentile) with the ratios, the paper's figures (TacTip SVM 3 ms per frame, James
+et al. 2018; FSR 4.9 ms only when an FSR bundle exists) and the sensor budget.
+
+    .venv/bin/python benchmarks/bench_deploy.py [--rounds 5] [--frames 2000] [--keep DIR]
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import contextlib  # noqa: E402
+import io  # noqa: E402
+import json  # noqa: E402
+import platform  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+#: name -> (train overrides, paper figure in us per frame or None, what it is)
+RUNS: dict[str, tuple[list[str], float | None, str]] = {
+    "tactip_svm": (
+        ["experiment=tactip_svm"],
+        3000.0,
+        "TacTip SVM, 3 ms per frame (James et al. 2018)",
+    ),
+    "tactip_svm_1128": (
+        [
+            "experiment=tactip_svm",
+            "dataset.n_trials=20",
+            "model.gamma=0.009",
+            "model.standardize=true",
+        ],
+        3000.0,
+        "TacTip SVM, gamma raised to reach the issue's ~1128 support vectors",
+    ),
+    "fsr": (
+        ["experiment=fsr_roc"],
+        4900.0,
+        "FSR touch-and-slip, 4.9 ms per decision (Gentile et al. 2020)",
+    ),
+    "force_mlp3": (
+        [
+            "experiment=biotac_force",
+            "~task.compare",
+            "dataset.n_trials=6",
+            "scene.model.duration_s=20",
+            "task.block_s=10",
+        ],
+        None,
+        "",
+    ),
+    "force_normals": (
+        [
+            "experiment=biotac_force",
+            "~task.compare",
+            "model=force_normals",
+            "dataset.n_trials=6",
+            "scene.model.duration_s=20",
+            "task.block_s=10",
+        ],
+        None,
+        "",
+    ),
+    "force_lwr": (
+        [
+            "experiment=biotac_force",
+            "~task.compare",
+            "model=force_lwr",
+            "dataset.n_trials=6",
+            "scene.model.duration_s=20",
+            "task.block_s=10",
+        ],
+        None,
+        "",
+    ),
+    "window_mlp": (
+        [
+            "experiment=biotac_slip_type",
+            "~task.compare",
+            "dataset.n_trials=40",
+            "task.sweep=[]",
+            "task.first_frame_control=false",
+            "task.dynamics=null",
+            "model.max_epochs=20",
+        ],
+        None,
+        "",
+    ),
+    "window_cnn": (
+        [
+            "experiment=biotac_slip_type",
+            "~task.compare",
+            "model=window_cnn",
+            "dataset.n_trials=40",
+            "task.sweep=[]",
+            "task.first_frame_control=false",
+            "task.dynamics=null",
+            "model.max_epochs=20",
+        ],
+        None,
+        "",
+    ),
+}
+
+
+def _compose(name: str, overrides: list[str]) -> Any:
+    from hydra import compose, initialize_config_dir
+
+    from slipkit import config_dir
+
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        return compose(config_name=name, overrides=overrides)
+
+
+def _pct(ns: list[int] | np.ndarray) -> tuple[float, float]:
+    us = np.asarray(ns, dtype=np.float64) / 1e3
+    p50, p99 = np.percentile(us, [50, 99])
+    return float(p50), float(p99)
+
+
+def _time_calls(fn: Any, items: Any) -> list[int]:
+    clock = time.perf_counter_ns
+    out = []
+    for x in items:
+        t0 = clock()
+        fn(x)
+        out.append(clock() - t0)
+    return out
+
+
+def matmul_rate() -> float:
+    """Single-thread numpy matmul rate, FLOP/s (best of 5 on 256 x 256 x 256)."""
+    rng = np.random.default_rng(0)
+    a, b = rng.normal(size=(256, 256)), rng.normal(size=(256, 256))
+    best = np.inf
+    for _ in range(5):
+        t0 = time.perf_counter()
+        for _ in range(10):
+            a @ b
+        best = min(best, (time.perf_counter() - t0) / 10)
+    return 2 * 256**3 / best
+
+
+def graph_flops(model_bytes: bytes, fallback: int | None) -> int:
+    """2 K N per Gemm / MatMul with a constant (K, N) weight, batch 1 (others ignored)."""
+    if fallback:
+        return int(fallback)
+    import onnx
+    from onnx import numpy_helper
+
+    m = onnx.load_from_string(model_bytes)
+    shapes = {t.name: numpy_helper.to_array(t).shape for t in m.graph.initializer}
+    flops = 0
+    for node in m.graph.node:
+        if node.op_type in ("Gemm", "MatMul") and len(node.input) > 1:
+            shp = shapes.get(node.input[1])
+            if shp is not None and len(shp) == 2:
+                flops += 2 * int(shp[0]) * int(shp[1])
+    return flops
+
+
+def identity_floor(input_shape: list[int], frames: int) -> list[int]:
+    """onnxruntime's per-call floor: an Identity graph on this input, IOBinding, one thread."""
+    import onnxruntime as ort
+    from onnx import TensorProto, helper
+
+    inp = helper.make_tensor_value_info("x", TensorProto.FLOAT, input_shape)
+    out = helper.make_tensor_value_info("y", TensorProto.FLOAT, input_shape)
+    g = helper.make_graph(
+        [helper.make_node("Identity", ["x"], ["y"])], "id", [inp], [out]
+    )
+    model = helper.make_model(g, opset_imports=[helper.make_opsetid("", 17)])
+    model.ir_version = 10
+    opts = ort.SessionOptions()
+    opts.intra_op_num_threads = 1
+    opts.inter_op_num_threads = 1
+    sess = ort.InferenceSession(
+        model.SerializeToString(), opts, providers=["CPUExecutionProvider"]
+    )
+    x = np.zeros(input_shape, np.float32)
+    y = np.zeros(input_shape, np.float32)
+    b = sess.io_binding()
+    b.bind_ortvalue_input("x", ort.OrtValue.ortvalue_from_numpy(x))
+    b.bind_ortvalue_output("y", ort.OrtValue.ortvalue_from_numpy(y))
+    for _ in range(50):
+        sess.run_with_iobinding(b)
+    return _time_calls(lambda _: sess.run_with_iobinding(b), range(frames))
+
+
+def numpy_svm_floor(model: Any, feats: np.ndarray) -> list[int]:
+    """The TacTip RBF SVM as numpy matrix products on one feature row (the issue's ~23 us)."""
+    svc = model.svc_
+    gamma = float(model.gamma_)
+    sv = np.asarray(svc.support_vectors_)
+    sv_sq = np.sum(sv * sv, axis=1)
+    dual = np.asarray(svc.dual_coef_).ravel()
+    b = float(np.asarray(svc.intercept_).ravel()[0])
+
+    def one(x: np.ndarray) -> float:
+        d = sv_sq - 2.0 * (sv @ x) + x @ x
+        return float(dual @ np.exp(-gamma * d) + b)
+
+    return _time_calls(one, feats)
+
+
+def _bound(sess: Any, in_name: str, out_name: str, shape: list[int]) -> Any:
+    """A function ``x -> None`` that writes one input and runs the session through IOBinding."""
+    import onnxruntime as ort
+
+    xb = np.zeros(shape, np.float32)
+    ob = np.zeros_like(np.asarray(sess.run([out_name], {in_name: xb})[0]))
+    binding = sess.io_binding()
+    binding.bind_ortvalue_input(in_name, ort.OrtValue.ortvalue_from_numpy(xb))
+    binding.bind_ortvalue_output(out_name, ort.OrtValue.ortvalue_from_numpy(ob))
+
+    def call(x: np.ndarray) -> None:
+        xb[0] = x
+        sess.run_with_iobinding(binding)
+
+    return call
+
+
+def _median(
+    stats: dict[str, list[tuple[float, float]]],
+) -> dict[str, tuple[float, ...]]:
+    return {k: tuple(np.median(np.asarray(v), axis=0)) for k, v in stats.items() if v}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--frames", type=int, default=2000)
+    ap.add_argument(
+        "--keep", type=Path, default=None, help="keep runs and bundles here"
+    )
+    ap.add_argument("--only", nargs="*", default=None, help="families to run")
+    args = ap.parse_args()
+
+    import onnxruntime as ort
+    import torch
+
+    torch.set_num_threads(1)
+    from slipkit.export import export
+    from slipkit.export import force as _force  # noqa: F401
+    from slipkit.export.commands import export_main
+    from slipkit.export.deploy import graph_inputs
+    from slipkit.export.parity import estimator_inputs, estimator_score
+    from slipkit.runtime import StreamLoop, load_bundle
+    from slipkit.train.commands import train_main
+    from slipkit.train.runs import read_run
+
+    root = args.keep or Path(tempfile.mkdtemp(prefix="bench_deploy-"))
+    rate = matmul_rate()
+    names = [n for n in RUNS if args.only is None or n in args.only]
+    rows: list[dict[str, Any]] = []
+    notes: list[str] = []
+    for name in names:
+        overrides, paper, _ = RUNS[name]
+        run_dir, bundle_dir = root / "runs" / name, root / "exports" / name
+        if not (run_dir / "run.json").is_file():
+            with contextlib.redirect_stdout(io.StringIO()):
+                train_main(
+                    _compose(
+                        "train", [*overrides, f"run_dir={run_dir}", "overwrite=true"]
+                    )
+                )
+        with contextlib.redirect_stdout(io.StringIO()):
+            export_main(
+                _compose(
+                    "export", [f"run={run_dir}", f"out={bundle_dir}", "overwrite=true"]
+                )
+            )
+        bundle = load_bundle(bundle_dir)
+        m = bundle.manifest
+        model = read_run(run_dir).model
+        svm = name.startswith("tactip_svm")
+        graph = export(model, **({"with_features": True} if svm else {}))
+        replay = np.load(bundle_dir / "replay.npz")
+        frames = replay["frames"][: args.frames]
+        times = replay["timestamps"][: args.frames]
+        in_shape = [int(s) for s in graph.input_shape[1:]]
+        inputs, _ = graph_inputs(
+            frames,
+            m.raw["frame"],
+            m.raw["preprocessing"],
+            in_shape,
+            skip_nonfinite=True,
+        )
+        x32 = inputs.astype(np.float32)
+        loop = StreamLoop(bundle)
+        (inp,) = m.inputs
+        bare = _bound(bundle.session, inp.name, m.decision.output, [1, *in_shape])
+        detector = hasattr(graph, "first_decision")
+        if detector:
+            # native: the batch detector's decision_function on one window (its
+            # last sample is the decision), the per-decision Python cost.
+            def native(x: np.ndarray, est: Any = model) -> None:
+                est.decision_function(x)
+
+            feats = inputs[:1]
+        else:
+
+            def native(x: np.ndarray, est: Any = model, g: Any = graph) -> None:
+                estimator_score(est, g, x[None])
+
+            feats = np.asarray(estimator_inputs(graph, inputs[:500]), dtype=np.float64)
+        stats: dict[str, list[tuple[float, float]]] = {
+            k: [] for k in ("loop", "bare", "native", "torch", "identity", "numpy")
+        }
+        module = getattr(model, "module_", None)
+        if module is not None:
+            # torch eager on the module alone (inputs already standardised: a lower
+            # bound for the estimator's own predict, which adds skorch and scalers).
+            module.eval()
+
+            def eager(x: np.ndarray, mod: Any = module) -> None:
+                with torch.no_grad():
+                    mod(torch.from_numpy(x[None]))
+
+        part: dict[str, list[tuple[float, float]]] = {
+            k: [] for k in ("bare", "native", "identity")
+        }
+        if svm:
+            # The SVM part alone (features in), as the issue's reference figures.
+            svm_graph = export(model)
+            svm_sess = ort.InferenceSession(
+                svm_graph.serialize(),
+                bundle.session_spec.options(),
+                providers=["CPUExecutionProvider"],
+            )
+            svm_bare = _bound(
+                svm_sess,
+                svm_graph.input_name,
+                svm_graph.score_output,
+                [1, feats.shape[1]],
+            )
+        for _ in range(args.rounds):
+            loop.reset()
+            for values, ts in zip(frames, times.tolist(), strict=True):
+                loop.step(values, ts)
+            stats["loop"].append(_pct(loop.result().latency_ns))
+            stats["bare"].append(_pct(_time_calls(bare, x32)))
+            stats["native"].append(_pct(_time_calls(native, inputs[:300])))
+            if module is not None:
+                stats["torch"].append(_pct(_time_calls(eager, x32[:1000])))
+            stats["identity"].append(_pct(identity_floor([1, *in_shape], 1000)))
+            if svm:
+                stats["numpy"].append(_pct(numpy_svm_floor(model, feats)))
+                part["bare"].append(
+                    _pct(_time_calls(svm_bare, feats.astype(np.float32)))
+                )
+                part["native"].append(
+                    _pct(
+                        _time_calls(
+                            lambda x, est=model: est.predict(x[None]), feats[:300]
+                        )
+                    )
+                )
+                part["identity"].append(_pct(identity_floor([1, feats.shape[1]], 1000)))
+        med = _median(stats)
+        flops = graph_flops(
+            graph.serialize(), getattr(model, "flops_per_window_", None)
+        )
+        floor = med["identity"][0] + flops / rate * 1e6
+        if "numpy" in med:
+            floor = min(floor, med["numpy"][0])
+        rows.append(
+            {
+                "model": f"{name} ({type(model).__name__})",
+                "loop": med["loop"],
+                "bare": med["bare"],
+                "native": med["native"],
+                "torch": med["torch"][0] if "torch" in med else None,
+                "identity": med["identity"][0],
+                "flops": flops,
+                "numpy": med["numpy"][0] if "numpy" in med else None,
+                "floor": floor,
+                "paper": paper,
+                "budget": m.budget.p99_ms * 1e3,
+            }
+        )
+        if svm:
+            n_sv = int(model.svc_.support_vectors_.shape[0])
+            notes.append(f"{name}: {n_sv} support vectors on {feats.shape[1]} features")
+            pm = _median(part)
+            sflops = graph_flops(svm_graph.serialize(), None)
+            rows.append(
+                {
+                    "model": f"{name}: SVM part only (features in; native = sklearn predict)",
+                    "loop": None,
+                    "bare": pm["bare"],
+                    "native": pm["native"],
+                    "torch": None,
+                    "identity": pm["identity"][0],
+                    "flops": sflops,
+                    "numpy": med["numpy"][0],
+                    "floor": min(
+                        pm["identity"][0] + sflops / rate * 1e6, med["numpy"][0]
+                    ),
+                    "paper": None,
+                    "budget": None,
+                }
+            )
+    print(
+        f"onnxruntime {ort.__version__}, numpy {np.__version__}, torch {torch.__version__}, "
+        f"{os.cpu_count()} CPUs ({platform.processor() or platform.machine()}), load average "
+        f"{os.getloadavg()[0]:.1f}; numpy matmul {rate / 1e9:.1f} GFLOP/s (1 thread); "
+        f"{args.frames} replay frames x {args.rounds} rounds (median of per-round "
+        "percentiles), batch 1, 1 intra-op thread; us per frame\n"
+    )
+    print(
+        "| model | loop p50 / p99 | bare ORT p50 / p99 | native p50 | torch eager p50 | floor (ORT id + FLOPs; numpy) "
+        "| bare / floor | loop / bare | native / bare | paper | paper / loop p50 | budget p99 | met |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        paper, loop_r = r["paper"], r["loop"]
+        numpy_txt = "" if r["numpy"] is None else f"; numpy {r['numpy']:.1f}"
+        cells = [
+            r["model"],
+            "-" if loop_r is None else f"{loop_r[0]:.1f} / {loop_r[1]:.1f}",
+            f"{r['bare'][0]:.1f} / {r['bare'][1]:.1f}",
+            f"{r['native'][0]:.1f}",
+            "-" if r["torch"] is None else f"{r['torch']:.1f}",
+            f"{r['floor']:.1f} ({r['identity']:.1f} + {r['flops']} FLOP{numpy_txt})",
+            f"{r['bare'][0] / r['floor']:.2f}x",
+            "-" if loop_r is None else f"{loop_r[0] / r['bare'][0]:.2f}x",
+            f"{r['native'][0] / r['bare'][0]:.1f}x",
+            "-" if paper is None else f"{paper:.0f}",
+            "-" if paper is None or loop_r is None else f"{paper / loop_r[0]:.0f}x",
+            "-" if r["budget"] is None else f"{r['budget']:.0f}",
+            "-" if loop_r is None else "yes" if loop_r[1] <= r["budget"] else "NO",
+        ]
+        print("| " + " | ".join(cells) + " |")
+    print()
+    for note in notes:
+        print(note)
+    if args.keep:
+        print(json.dumps({"runs": str(root)}))
+
+
+if __name__ == "__main__":
+    main()

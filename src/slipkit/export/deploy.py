@@ -1,0 +1,630 @@
+"""What the gripper-PC loop feeds each task's exported model: one deployer per task class.
+
+``slipkit export`` knows how to turn a fitted estimator into a graph (the exporter
+registry, :mod:`slipkit.export.registry`); this module knows, per *task*, what the
+runtime (:mod:`slipkit.runtime`) must do around that graph so that it sees what the
+estimator saw in training:
+
+* the **frame**: stream(s), channel names, one frame's shape, frames per model call
+  (``window``), frames between calls (``hop``) and the sensor rate (Hz);
+* the **preprocessing** the graph does not hold, as steps of the runtime's closed op
+  registry (:data:`slipkit.runtime.preprocessing.OPS`);
+* the **exporter options** (e.g. the TacTip pin-velocity features inside the graph);
+* which class is **slip** (``positive``) and the **debounce** ``k``;
+* the **held-out trials** of the run (its test split, rebuilt from the run's config
+  with :func:`slipkit.train.data.training_dataset`), as raw frames + timestamps.
+
+A deployer is registered per task class (:func:`register_deployer`; a subclass uses
+its parent's, as :func:`slipkit.export.registry.exporter_for`). The model inputs for
+parity are computed with the runtime's own :class:`~slipkit.runtime.preprocessing.Pipeline`
+on the runtime's own windows (:func:`graph_inputs`), so the check covers exactly what
+the loop will feed the graph.
+
+Per task
+--------
+``TacTipFrames``
+    Frame = the ``pins`` stream (``x0..x{N-1}, y0..y{N-1}``, mm), window 2, hop 1; the
+    pin-velocity features are inside the graph (``with_features=True``). One
+    preprocessing step: ``subtract`` a fixed reference frame (the median first frame
+    of the training trials) in float64 before the float32 cast of the graph input:
+    absolute positions of ~10 mm in float32 have ~1e-6 mm resolution, resting pins
+    move ~1e-3 mm per frame, and the offset cancels in the velocity
+    (``docs/export.md``). Slip class ``slip``; debounce ``task.debounce_k``.
+``ForceRegression``
+    Frame = one electrode frame (window 1, hop 1). With ``baseline: first`` one
+    step, ``baseline_first`` (``frames = task.baseline_frames``): the runtime takes
+    the baseline from the first ``baseline_frames`` frames of the stream (start the
+    loop before contact, as each simulated trial starts at rest; until they have
+    arrived, the median of those that have). A regressor has no classes: the
+    decision is ``score[axis] > threshold`` (N) on the axis and threshold the export
+    config gives (``regression``), recorded without ``classes``.
+``WindowClassification``
+    Frame = one frame of ``task.stream`` (``task.channels``), window ``W`` and hop
+    from the task (in frames). Mode ``raw``: no step; ``window``:
+    ``subtract_first``; ``trial``: ``baseline_first`` with ``frames = 1``. Slip class:
+    ``slip`` when it is a class, else the export config's ``positive`` (default the
+    last class in ``classes_`` order).
+``StreamDetection``
+    Frame = one raw sample of ``task.stream`` (``task.channels``); window and hop are
+    what the detector's graph needs (:class:`slipkit.export.detectors.DetectorGraph`,
+    e.g. FSR: 10 samples every 5), no preprocessing (the detector's math is in the
+    graph). Slip class ``1`` (the detector's positive class); parity is the
+    detectors' own check on the held-out recordings.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from slipkit.data.dataset import Dataset
+from slipkit.errors import SlipkitError
+from slipkit.runtime.preprocessing import Pipeline
+from slipkit.train.runs import Run
+from slipkit.train.task import Task
+
+log = logging.getLogger("slipkit.export")
+
+
+@dataclass(frozen=True)
+class HeldOutTrial:
+    """One held-out trial as the runtime would receive it.
+
+    Attributes
+    ----------
+    trial_id : str
+        The trial.
+    frames : ndarray of shape (n, *frame_shape)
+        Raw frames, float64, in the manifest's channel order.
+    timestamps : ndarray of shape (n,)
+        Frame times, s (the trial's own clock).
+    keep : ndarray of bool, shape (n,), or None
+        Frames that are held out (a decision whose last frame is kept is used for
+        parity); None: all of them.
+    """
+
+    trial_id: str
+    frames: NDArray[np.float64]
+    timestamps: NDArray[np.float64]
+    keep: NDArray[np.bool_] | None = None
+
+
+@dataclass
+class Deployment:
+    """Everything a bundle needs besides the graph, for one run.
+
+    Attributes
+    ----------
+    frame : dict
+        The manifest's ``frame`` object (streams, channels, shape, window, hop, rate_hz).
+    preprocessing : list of dict
+        Runtime op steps (manifest ``preprocessing``).
+    export_options : dict
+        Keyword options for :func:`slipkit.export.registry.export`.
+    positive : str or None
+        The slip class (None: a regressor, see ``regression``).
+    debounce_k : int
+        Consecutive slip decisions before slip is declared.
+    trials : list of HeldOutTrial
+        The run's held-out trials (parity and ``replay.npz``).
+    held_out : bool
+        False when the saved model saw every trial (k-fold runs refit on all).
+    notes : list of str
+        What the runtime does and why, for the manifest's description.
+    regression : dict or None
+        For regressors: ``{"column": int, "axis": str, "threshold": float}``, the
+        score entry and threshold of the manifest's decision.
+    detector : bool
+        An analytic stream detector: the graph
+        (:class:`slipkit.export.detectors.DetectorGraph`) fixes ``window`` and
+        ``hop``, and parity is :func:`slipkit.export.detectors.check_detector_parity`
+        on the held-out recordings.
+    """
+
+    frame: dict[str, Any]
+    preprocessing: list[dict[str, Any]]
+    export_options: dict[str, Any]
+    positive: str | None
+    debounce_k: int
+    trials: list[HeldOutTrial]
+    held_out: bool = True
+    notes: list[str] = field(default_factory=list)
+    regression: dict[str, Any] | None = None
+    detector: bool = False
+
+    @property
+    def frame_shape(self) -> tuple[int, ...]:
+        """Shape of one frame."""
+        return tuple(int(s) for s in self.frame["shape"])
+
+    def replay(
+        self, max_frames: int | None = None
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The held-out trials end to end: frames and non-decreasing timestamps (s).
+
+        Each trial's clock is shifted to start one frame period after the previous
+        trial's last frame. ``max_frames`` keeps the first frames only.
+        """
+        period = 1.0 / float(self.frame["rate_hz"])
+        frames, times, start = [], [], 0.0
+        for tr in self.trials:
+            t = tr.timestamps - tr.timestamps[0] + start
+            frames.append(tr.frames)
+            times.append(t)
+            start = float(t[-1]) + period if len(t) else start
+        f = np.concatenate(frames) if frames else np.zeros((0, *self.frame_shape))
+        ts = np.concatenate(times) if times else np.zeros(0)
+        if max_frames is not None:
+            f, ts = f[:max_frames], ts[:max_frames]
+        return f, ts
+
+
+Deployer = Callable[[Task, Run, Dataset, Mapping[str, Any]], Deployment]
+
+_DEPLOYERS: dict[type, Deployer] = {}
+
+
+def register_deployer(cls: type, fn: Deployer, *, overwrite: bool = False) -> None:
+    """Register ``fn(task, run, dataset, options) -> Deployment`` for task class ``cls``."""
+    if cls in _DEPLOYERS and not overwrite:
+        raise SlipkitError(
+            f"a deployer is already registered for {cls.__qualname__}; pass overwrite=True"
+        )
+    _DEPLOYERS[cls] = fn
+
+
+def deployer_for(task: Task) -> Deployer:
+    """The deployer of ``task``'s class or its nearest registered base (SlipkitError if none)."""
+    for base in type(task).__mro__:
+        if base in _DEPLOYERS:
+            return _DEPLOYERS[base]
+    known = ", ".join(sorted(c.__name__ for c in _DEPLOYERS))
+    raise SlipkitError(
+        f"slipkit export does not know how to deploy task {type(task).__name__} "
+        f"(deployable tasks: {known})"
+    )
+
+
+def deployment(
+    task: Task, run: Run, dataset: Dataset, options: Mapping[str, Any] | None = None
+) -> Deployment:
+    """The :class:`Deployment` of ``run`` (its task rebuilt, its dataset re-made)."""
+    return deployer_for(task)(task, run, dataset, dict(options or {}))
+
+
+# -- windows and graph inputs, as the runtime loop makes them -----------------------
+
+
+def decision_ends(n_frames: int, window: int, hop: int) -> NDArray[np.intp]:
+    """Indices of the frames on which the loop decides: ``window - 1 + j * hop``."""
+    if n_frames < window:
+        return np.zeros(0, dtype=np.intp)
+    return np.arange(window - 1, n_frames, hop, dtype=np.intp)
+
+
+def graph_inputs(
+    frames: NDArray[np.floating],
+    frame: Mapping[str, Any],
+    preprocessing: Sequence[Mapping[str, Any]],
+    input_shape: Sequence[int],
+    *,
+    skip_nonfinite: bool = False,
+) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+    """The graph input of every loop decision on one stream, and the frame it ends on.
+
+    Runs the runtime's :class:`~slipkit.runtime.preprocessing.Pipeline` (freshly
+    compiled, so stateful steps start from the stream's first frame) over the
+    windows the loop forms, in order. With ``skip_nonfinite``, windows holding a
+    bad value are skipped (no preprocessing call), as
+    :class:`slipkit.runtime.StreamLoop` skips them: an infinity, or a NaN unless
+    every stream reads NaN as "missing" (``NAN_IS_MISSING_STREAMS``: TacTip pins);
+    without it every window is kept (parity).
+
+    Parameters
+    ----------
+    frames : ndarray of shape (n, *frame.shape)
+        One stream's frames.
+    frame : mapping
+        The manifest ``frame`` object.
+    preprocessing : sequence of mapping
+        The manifest ``preprocessing`` steps.
+    input_shape : sequence of int
+        The graph input's shape without the batch axis.
+
+    Returns
+    -------
+    inputs : ndarray of shape (n_decisions, *input_shape), float64
+    ends : ndarray of int
+        Frame index that completes each decision's window.
+    """
+    window, hop = int(frame["window"]), int(frame.get("hop", 1))
+    shape = tuple(int(s) for s in frame["shape"])
+    x = np.asarray(frames, dtype=np.float64).reshape(len(frames), *shape)
+    pipeline = Pipeline(list(preprocessing), (window, *shape), "manifest.json")
+    ends = decision_ends(len(x), window, hop)
+    if skip_nonfinite:
+        from slipkit.runtime.loop import NAN_IS_MISSING_STREAMS
+
+        flat = x.reshape(len(x), -1)
+        streams = set(frame.get("streams") or ())
+        if streams and streams <= NAN_IS_MISSING_STREAMS:
+            ok = ~np.isinf(flat).any(axis=1)  # NaN means "missing" (TacTip pins)
+        else:
+            ok = np.isfinite(flat).all(axis=1)
+        bad = np.concatenate([[0], np.cumsum(~ok)])
+        ends = ends[bad[ends + 1] - bad[ends + 1 - window] == 0]
+    out = np.empty((len(ends), *(int(s) for s in input_shape)))
+    for i, end in enumerate(ends):
+        out[i] = np.reshape(pipeline(x[end - window + 1 : end + 1]), out.shape[1:])
+    return out, ends
+
+
+def held_out_inputs(
+    dep: Deployment, input_shape: Sequence[int], *, max_calls: int | None = None
+) -> NDArray[np.float64]:
+    """Graph inputs of every held-out decision, each trial its own stream (as in training)."""
+    parts = []
+    for tr in dep.trials:
+        x, ends = graph_inputs(tr.frames, dep.frame, dep.preprocessing, input_shape)
+        if tr.keep is not None:
+            x = x[tr.keep[ends]]
+        parts.append(x)
+    out = (
+        np.concatenate(parts)
+        if parts
+        else np.zeros((0, *(int(s) for s in input_shape)))
+    )
+    return out if max_calls is None else out[:max_calls]
+
+
+def slip_decisions(
+    scores: NDArray[np.floating], decision: Mapping[str, Any], threshold: float | None
+) -> NDArray[np.bool_]:
+    """Per-call slip decisions of the manifest rule (as :class:`slipkit.runtime.StreamLoop`).
+
+    ``scores`` has one row per call (the flattened score output).
+    """
+    s = np.asarray(scores, dtype=np.float64).reshape(len(scores), -1)
+    classes = decision.get("classes")
+    positive = decision.get("positive")
+    if decision["rule"] == "argmax":
+        assert classes is not None
+        return np.asarray(np.argmax(s, axis=1) == list(classes).index(positive))
+    col = s[:, int(decision.get("column", 0))]
+    thr = float(threshold if threshold is not None else 0.0)
+    above = col > thr if decision.get("strict", False) else col >= thr
+    slip_above = classes is None or positive == classes[1]
+    return np.asarray(above == slip_above)
+
+
+# -- helpers shared by the deployers --------------------------------------------------
+
+
+def run_metrics(run: Run) -> dict[str, Any]:
+    """The run's ``metrics.json`` ({} when absent)."""
+    path = Path(run.path) / "metrics.json"
+    if not path.is_file():
+        return {}
+    loaded: dict[str, Any] = json.loads(path.read_text(encoding="utf-8"))
+    return loaded
+
+
+def _rate(dataset: Dataset, stream: str) -> float:
+    if stream not in dataset.streams:
+        raise SlipkitError(
+            f"dataset {dataset.name!r} has no stream {stream!r}; streams: {sorted(dataset.streams)}"
+        )
+    rate = dataset.streams[stream].rate_hz
+    if rate is None:
+        raise SlipkitError(f"stream {stream!r} has no frame rate: cannot deploy it")
+    return float(rate)
+
+
+def trial_frames(
+    dataset: Dataset, trial_ids: Sequence[str], stream: str, channels: Sequence[str]
+) -> list[HeldOutTrial]:
+    """Frames of ``channels`` of ``stream`` for each of ``trial_ids``, in time order."""
+    wanted = set(map(str, trial_ids))
+    out = []
+    for trial in dataset.subset([t for t in dataset.trial_ids if str(t) in wanted]):
+        table = trial.streams[stream].sort_values("t", kind="stable")
+        out.append(
+            HeldOutTrial(
+                str(trial.trial_id),
+                table[list(channels)].to_numpy(dtype=np.float64),
+                table["t"].to_numpy(dtype=np.float64),
+            )
+        )
+    if not out:
+        raise SlipkitError(
+            f"none of the held-out trials {sorted(wanted)[:5]} is in the rebuilt dataset "
+            f"{dataset.name!r}: was the run trained on other data?"
+        )
+    return out
+
+
+def _frame(
+    streams: Sequence[str],
+    channels: Sequence[str],
+    window: int,
+    hop: int,
+    rate: float,
+) -> dict[str, Any]:
+    return {
+        "streams": list(streams),
+        "channels": list(map(str, channels)),
+        "shape": [len(channels)],
+        "window": int(window),
+        "hop": int(hop),
+        "rate_hz": float(rate),
+    }
+
+
+# -- TacTip ---------------------------------------------------------------------------
+
+
+def _deploy_tactip(
+    task: Task, run: Run, dataset: Dataset, options: Mapping[str, Any]
+) -> Deployment:
+    from slipkit.data.splits import split_by_trial
+    from slipkit.features.pins import SLIP
+    from slipkit.train.tasks.tactip import TacTipFrames
+
+    assert isinstance(task, TacTipFrames)
+    stream = task.stream
+    rate = _rate(dataset, stream)
+    channels = list(dataset.streams[stream].channels)
+    split = run_metrics(run).get("split", {})
+    seed = int(run.config.get("seed", 0))
+    if split.get("test"):
+        train_ids, test_ids = list(split["train"]), list(split["test"])
+    else:  # recompute the task's split (same seed, same call)
+        s = split_by_trial(dataset, test_size=task.test_size, val_size=0.0, seed=seed)
+        train_ids, test_ids = list(s.train), list(s.test)
+    # The fixed reference frame: the median first frame of the training trials (NaN
+    # for a pin never seen is 0: it only has to be finite and near the positions).
+    firsts = np.stack(
+        [tr.frames[0] for tr in trial_frames(dataset, train_ids, stream, channels)]
+    )
+    with np.errstate(all="ignore"):
+        ref = np.nanmedian(np.where(np.isfinite(firsts), firsts, np.nan), axis=0)
+    ref = np.where(np.isfinite(ref), ref, 0.0)
+    return Deployment(
+        frame=_frame([stream], channels, 2, 1, rate),
+        preprocessing=[{"op": "subtract", "value": np.round(ref, 6).tolist()}],
+        export_options={"with_features": True, "variant": task.variant},
+        positive=SLIP,
+        debounce_k=int(task.debounce_k),
+        trials=trial_frames(dataset, test_ids, stream, channels),
+        notes=[
+            "raw pin positions in (x block, y block, mm); the graph computes the "
+            f"{task.variant} pin-velocity features of the last two frames",
+            "preprocessing subtracts a fixed reference frame (median first frame of "
+            "the training trials) in float64 before the float32 cast",
+        ],
+    )
+
+
+# -- force regression -------------------------------------------------------------------
+
+
+def _deploy_force(
+    task: Task, run: Run, dataset: Dataset, options: Mapping[str, Any]
+) -> Deployment:
+    from slipkit.train.tasks.force import ForceRegression
+
+    assert isinstance(task, ForceRegression)
+    if task.pdc_stream is not None:
+        raise SlipkitError(
+            "slipkit export: ForceRegression with task.pdc_stream (two input streams "
+            "in one frame) is not deployable yet; train with pdc_stream=null"
+        )
+    stream = task.stream
+    rate = _rate(dataset, stream)
+    channels = list(dataset.streams[stream].channels)
+    seed = int(run.config.get("seed", 0))
+    frames = task.frames(dataset)
+    sides, _ = task.sides(dataset, frames, seed=seed)
+    test_rows = set(frames.row[sides.test].tolist())
+    test_trials = list(dict.fromkeys(frames.trial[sides.test].tolist()))
+    trials = trial_frames(dataset, test_trials, stream, channels)
+    # Mark the test-block frames of each trial (rows of the long stream table).
+    table = dataset.stream(stream).reset_index(drop=True)
+    rows_of = table.groupby(table["trial_id"].astype(str), sort=False).indices
+    kept = []
+    for tr in trials:
+        idx = rows_of[tr.trial_id]
+        order = np.argsort(table["t"].to_numpy()[idx], kind="stable")
+        keep = np.isin(idx[order], list(test_rows))
+        kept.append(HeldOutTrial(tr.trial_id, tr.frames, tr.timestamps, keep))
+    axes = list(task.axes)
+    reg = dict(options.get("regression") or {})
+    axis = str(reg.get("axis") or axes[-1])
+    if axis not in axes:
+        raise SlipkitError(
+            f"regression.axis {axis!r} is not one of the task's axes {axes}"
+        )
+    raw_thr = reg.get("threshold")
+    threshold = 0.0 if raw_thr is None else float(raw_thr)
+    steps: list[dict[str, Any]] = []
+    notes = [f"electrode frames of stream {stream!r} (counts), one per model call"]
+    if task.baseline == "first":
+        steps.append(
+            {"op": "baseline_first", "frames": int(task.baseline_frames), "hop": 1}
+        )
+        notes.append(
+            f"baseline: median of the first {int(task.baseline_frames)} frames of the "
+            "stream, subtracted from every frame (start the loop before contact)"
+        )
+    notes.append(
+        f"decision: {axis} > {threshold:g} N (a force estimate has no slip class)"
+    )
+    return Deployment(
+        frame=_frame([stream], channels, 1, 1, rate),
+        preprocessing=steps,
+        export_options={},
+        positive=None,
+        debounce_k=int(options.get("debounce_k") or 1),
+        trials=kept,
+        notes=notes,
+        regression={
+            "axis": axis,
+            "column": axes.index(axis),
+            "threshold": threshold,
+        },
+    )
+
+
+# -- window classification ----------------------------------------------------------------
+
+
+def _deploy_windows(
+    task: Task, run: Run, dataset: Dataset, options: Mapping[str, Any]
+) -> Deployment:
+    from slipkit.train.tasks.slip_type import WindowClassification
+
+    assert isinstance(task, WindowClassification)
+    stream = task.stream
+    rate = _rate(dataset, stream)
+    spec = dataset.streams[stream]
+    channels = list(spec.channels) if task.channels is None else list(task.channels)
+    width = task.frames(task.window, dataset)
+    hop = task.frames(task.hop, dataset)
+    seed = int(run.config.get("seed", 0))
+    metrics = run_metrics(run)
+    folds = metrics.get("split", {}).get("test") or [
+        te for _, te in task.splits(dataset, seed)
+    ]
+    test_ids = [str(t) for fold in folds for t in fold]
+    held_out = len(folds) <= 1
+    steps: list[dict[str, Any]]
+    if task.mode == "raw":
+        steps = []
+    elif task.mode == "window":
+        steps = [{"op": "subtract_first"}]
+    elif task.mode == "trial":
+        steps = [{"op": "baseline_first", "frames": 1, "hop": hop}]
+    else:
+        raise SlipkitError(
+            f"task.mode {task.mode!r} is a control (each window replaced by the trial's "
+            "first frame), not a deployable model"
+        )
+    model_classes = [str(c) for c in getattr(run.model, "classes_", [])]
+    positive = options.get("positive")
+    if positive is None:
+        positive = "slip" if "slip" in model_classes else model_classes[-1]
+    if str(positive) not in model_classes:
+        raise SlipkitError(
+            f"positive {positive!r} is not a class of the model {model_classes}"
+        )
+    return Deployment(
+        frame=_frame([stream], channels, width, hop, rate),
+        preprocessing=steps,
+        export_options={},
+        positive=str(positive),
+        debounce_k=int(options.get("debounce_k") or 1),
+        trials=trial_frames(dataset, test_ids, stream, channels),
+        held_out=held_out,
+        notes=[
+            f"windows of {width} frames of {stream!r} ({len(channels)} channels), "
+            f"flattened frame-major, mode {task.mode}, every {hop} frames",
+            f"slip class: {positive!r} of {model_classes}",
+        ],
+    )
+
+
+# -- analytic stream detectors ------------------------------------------------------------
+
+
+def _deploy_detection(
+    task: Task, run: Run, dataset: Dataset, options: Mapping[str, Any]
+) -> Deployment:
+    from slipkit.data.splits import split_by_trial
+    from slipkit.train.tasks.detection import StreamDetection
+
+    assert isinstance(task, StreamDetection)
+    stream = task.stream
+    rate = _rate(dataset, stream)
+    channels = (
+        list(dataset.streams[stream].channels)
+        if task.channels is None
+        else list(task.channels)
+    )
+    split = run_metrics(run).get("split", {})
+    if split.get("test"):
+        test_ids = list(split["test"])
+    else:  # the task's own split: by trial, its test_size, the run's seed
+        seed = int(run.config.get("seed", 0))
+        test_ids = list(
+            split_by_trial(dataset, test_size=task.test_size, seed=seed).test
+        )
+    classes = [str(c) for c in getattr(run.model, "classes_", ["0", "1"])]
+    positive = str(options.get("positive") or classes[-1])
+    export_options: dict[str, Any] = {}
+    notes = []
+    from slipkit.baselines.biotac import PressureVibration
+
+    if isinstance(run.model, PressureVibration) and run.model.baseline is None:
+        # The batch detector measures its baseline per recording; the graph needs a
+        # fixed one: the median over the training recordings (the exporter's helper).
+        from slipkit.export.detectors import pressure_baseline
+
+        train = [t for t in dataset.trial_ids if str(t) not in set(map(str, test_ids))]
+        rec = trial_frames(dataset, train, stream, channels)
+        X = np.concatenate([r.frames for r in rec])
+        seg = np.concatenate([np.full(len(r.frames), k) for k, r in enumerate(rec)])
+        base = pressure_baseline(run.model, X, segments=seg)
+        export_options["baseline"] = base
+        notes.append(
+            f"fixed pressure baseline {base:.4g} counts RMS (median of the training "
+            "recordings; the batch detector measures one per recording)"
+        )
+    return Deployment(
+        # window and hop come from the graph (DetectorGraph.window / .hop)
+        frame=_frame([stream], channels, 1, 1, rate),
+        preprocessing=[],
+        export_options=export_options,
+        positive=positive,
+        debounce_k=int(options.get("debounce_k") or 1),
+        trials=trial_frames(dataset, test_ids, stream, channels),
+        notes=[
+            f"raw samples of {stream!r} ({', '.join(channels)}) at {rate:g} Hz; the graph "
+            f"holds {type(run.model).__name__}'s math on a window of the last samples",
+            *notes,
+        ],
+        detector=True,
+    )
+
+
+def _register_builtin() -> None:
+    from slipkit.train.tasks.detection import StreamDetection
+    from slipkit.train.tasks.force import ForceRegression
+    from slipkit.train.tasks.slip_type import WindowClassification
+    from slipkit.train.tasks.tactip import TacTipFrames
+
+    register_deployer(TacTipFrames, _deploy_tactip)
+    register_deployer(ForceRegression, _deploy_force)
+    register_deployer(WindowClassification, _deploy_windows)
+    register_deployer(StreamDetection, _deploy_detection)
+
+
+_register_builtin()
+
+__all__ = [
+    "Deployment",
+    "HeldOutTrial",
+    "decision_ends",
+    "deployer_for",
+    "deployment",
+    "graph_inputs",
+    "held_out_inputs",
+    "register_deployer",
+    "slip_decisions",
+]
