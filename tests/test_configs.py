@@ -20,6 +20,7 @@ GROUP_PRIMARY = {
     "detector": "train",
     "experiment": "train",
     "deploy": "export",
+    "comparison": "compare",
 }
 PRIMARY = sorted(p.stem for p in CONFIGS.glob("*.yaml"))
 GROUP_FILES = sorted(

@@ -24,7 +24,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     ),
     "demo": (
         "slipkit.demo:demo_main",
-        "the main job on built-in defaults: simulate scenes, import real data, summarise",
+        "the whole pipeline on built-in defaults: simulate, train, compare, export, replay, report",
     ),
     "simulate": (
         "slipkit.sim.commands:simulate_main",
@@ -37,6 +37,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "evaluate": (
         "slipkit.train.commands:evaluate_main",
         "score a run on a dataset it was not trained on (run=... dataset=...)",
+    ),
+    "compare": (
+        "slipkit.compare.commands:compare_main",
+        "learned vs analytic on one split: accuracy, delay, compute per frame (comparison=...)",
     ),
     "export": (
         "slipkit.export.commands:export_main",

@@ -1,0 +1,515 @@
+"""Per-task adapters: one task's metrics (and its fitted estimator) -> one unified row.
+
+The tasks (:mod:`slipkit.train.tasks`) each score in their family's terms (TacTip
+frames, windows of electrodes, stream samples and events, force axes, SlipTack
+speeds, DAVIS bins). A comparison needs the same columns for every estimator, so
+each adapter reads what its task already wrote (``metrics.json``, the predictions
+table) and, only where the task keeps no scores, asks the fitted estimator again on
+the same test trials (ROC curves). Nothing here re-implements a task.
+
+Unified columns (:data:`ROW_COLUMNS`; a missing one is NaN):
+
+* frame level: ``accuracy``, ``balanced_accuracy``, ``f1`` (the slip class's F1 when
+  the task has a slip class, else macro F1), ``tpr``, ``tnr``, ``fpr``, ``fnr``,
+  ``roc_auc`` (slip as the positive class; a binary slip-type task takes its second
+  class);
+* event level: ``delay_ms`` (median detection delay from the true slip onset, ms),
+  ``missed`` (slips never detected), ``n_slips``, ``false_alarms_per_min`` (alarms
+  per minute of non-slip data);
+* regression: ``rmse`` and ``smse`` (means over axes) and ``rmse_<axis>``,
+  ``smse_<axis>`` per axis (force N; SlipTack speed mm/s or acceleration m/s^2);
+* the window: ``window_frames`` and ``window_ms`` (sensor frames the estimator reads
+  for one decision) and ``decision_frames`` (frames from the first one it reads to a
+  declared slip, with the online debounce).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from slipkit.data.dataset import Dataset
+from slipkit.train.task import Task
+
+#: unified metric columns, in table order (costs are added by :mod:`.costs`)
+ROW_COLUMNS = (
+    "accuracy",
+    "balanced_accuracy",
+    "f1",
+    "tpr",
+    "tnr",
+    "fpr",
+    "fnr",
+    "roc_auc",
+    "delay_ms",
+    "missed",
+    "n_slips",
+    "false_alarms_per_min",
+    "rmse",
+    "smse",
+    "window_frames",
+    "window_ms",
+    "decision_frames",
+)
+
+
+@dataclass
+class Evaluation:
+    """One estimator's scores on the shared test side, in comparison terms.
+
+    Attributes
+    ----------
+    row : dict
+        Unified columns (:data:`ROW_COLUMNS` and per-axis ``rmse_<axis>``).
+    confusion : tuple of (list of str, ndarray) or None
+        Class labels and the test confusion matrix (rows true, columns predicted).
+    roc : dict or None
+        ``{"fpr": ndarray, "tpr": ndarray, "point": (fpr, tpr) or None, "unit": str}``;
+        ``point`` is the operating point the estimator's threshold chose.
+    delays_ms : list of float
+        Detection delay of every detected test slip, ms.
+    vs_time : DataFrame or None
+        ``t_rel_s`` (s from the onset) and ``accuracy`` of test windows.
+    vs_width : DataFrame or None
+        ``ms`` (window length) and ``accuracy``, each width refitted by the task.
+    split : object
+        What the task recorded as its split (checked equal across estimators).
+    search : DataFrame or None
+        ``number`` and ``value`` (CV score) of each in-run search trial, in order.
+    """
+
+    row: dict[str, Any] = field(default_factory=dict)
+    confusion: tuple[list[str], np.ndarray] | None = None
+    roc: dict[str, Any] | None = None
+    delays_ms: list[float] = field(default_factory=list)
+    vs_time: pd.DataFrame | None = None
+    vs_width: pd.DataFrame | None = None
+    split: Any = None
+    search: pd.DataFrame | None = None
+
+
+@dataclass(frozen=True)
+class RunView:
+    """What an adapter may read: the task, its metrics and files, the fitted estimator, the data."""
+
+    task: Task
+    metrics: Mapping[str, Any]
+    folder: Path
+    model: Any
+    dataset: Dataset
+
+
+Adapter = Callable[[RunView], Evaluation]
+_ADAPTERS: dict[type, Adapter] = {}
+
+
+def register_adapter(task_cls: type, fn: Adapter) -> None:
+    """Use ``fn`` for tasks of ``task_cls`` (and subclasses without their own)."""
+    _ADAPTERS[task_cls] = fn
+
+
+def adapt(view: RunView) -> Evaluation:
+    """The unified evaluation of ``view`` by the adapter of its task's class."""
+    for cls in type(view.task).__mro__:
+        if cls in _ADAPTERS:
+            ev = _ADAPTERS[cls](view)
+            for col in ROW_COLUMNS:
+                ev.row.setdefault(col, math.nan)
+            return ev
+    raise TypeError(
+        f"no comparison adapter for task {type(view.task).__name__}; register one with "
+        "slipkit.compare.adapters.register_adapter"
+    )
+
+
+# -- helpers ----------------------------------------------------------------------------
+
+
+def binary_rates(cm: np.ndarray) -> dict[str, float]:
+    """Frame rates of a 2 x 2 confusion matrix ``[[tn, fp], [fn, tp]]`` (positive second)."""
+    (tn, fp), (fn, tp) = np.asarray(cm, dtype=float)
+    n = tn + fp + fn + tp
+
+    def div(a: float, b: float) -> float:
+        return a / b if b else math.nan
+
+    tpr, tnr = div(tp, tp + fn), div(tn, tn + fp)
+    return {
+        "accuracy": div(tp + tn, n),
+        "balanced_accuracy": (tpr + tnr) / 2,
+        "f1": div(2 * tp, 2 * tp + fp + fn),
+        "tpr": tpr,
+        "tnr": tnr,
+        "fpr": div(fp, fp + tn),
+        "fnr": div(fn, fn + tp),
+    }
+
+
+def _num(value: Any) -> float:
+    return math.nan if value is None else float(value)
+
+
+def _roc(
+    y: np.ndarray, s: np.ndarray, point: tuple[float, float] | None, unit: str
+) -> dict[str, Any] | None:
+    from sklearn.metrics import roc_auc_score, roc_curve
+
+    y = np.asarray(y).astype(int)
+    if len(np.unique(y)) != 2:
+        return None
+    s = np.asarray(s, dtype=np.float64)
+    s = np.where(np.isfinite(s), s, np.finfo(np.float64).min)
+    fpr, tpr, _ = roc_curve(y, s)
+    return {
+        "fpr": fpr,
+        "tpr": tpr,
+        "auc": float(roc_auc_score(y, s)),
+        "point": point,
+        "unit": unit,
+    }
+
+
+def _false_alarms(
+    table: pd.DataFrame, positive: str, debounce_k: int, rate_hz: float
+) -> tuple[int, float]:
+    """(alarms, minutes) over the non-slip frames of a per-frame predictions table.
+
+    An alarm is a debounced slip declaration (``k`` consecutive slip predictions)
+    that starts on a frame labelled non-slip; the minutes are non-slip frames / rate.
+    """
+    alarms, negatives = 0, 0
+    for _, g in table.groupby("trial_id", sort=False):
+        truth = (g["label"].astype(str) == positive).to_numpy()
+        pred = (g["pred"].astype(str) == positive).to_numpy()
+        negatives += int((~truth).sum())
+        run = 0
+        for p, t in zip(pred, truth, strict=True):
+            run = run + 1 if p else 0
+            if run == debounce_k and not t:
+                alarms += 1
+    return alarms, negatives / rate_hz / 60.0
+
+
+# -- TacTip frames --------------------------------------------------------------------
+
+
+def adapt_tactip(view: RunView) -> Evaluation:
+    """TacTip per-frame slip / static (:class:`~slipkit.train.tasks.tactip.TacTipFrames`)."""
+    from slipkit.features.pins import SLIP
+
+    task: Any = view.task
+    test = view.metrics["test"]
+    labels = [str(x) for x in test["labels"]]
+    cm = np.asarray(test["confusion"])
+    row: dict[str, Any] = binary_rates(cm) if labels[-1] == SLIP else {}
+    det = test["detection"]
+    rate = task.rate_hz(view.dataset)
+    delays = [d * 1000.0 / rate for d in det["delay_frames"] if d is not None]
+    preds = pd.read_csv(view.folder / "test_predictions.csv")
+    alarms, minutes = _false_alarms(preds, SLIP, int(task.debounce_k), rate)
+    row.update(
+        delay_ms=_num(det["median_ms"]),
+        missed=int(det["missed"]),
+        n_slips=int(det["n_trials"]),
+        false_alarms_per_min=alarms / minutes if minutes else math.nan,
+        window_frames=2,  # a pin velocity is the difference of two frames
+        window_ms=2 * 1000.0 / rate,
+        decision_frames=2 + int(task.debounce_k) - 1,
+    )
+    roc = None
+    if hasattr(view.model, "decision_function"):
+        test_ds = view.dataset.subset(list(view.metrics["split"]["test"]))
+        feats = task.features(test_ds)
+        scores = np.asarray(view.model.decision_function(feats.X), dtype=float)
+        classes = [str(c) for c in getattr(view.model, "classes_", ["", SLIP])]
+        if (
+            classes[-1] != SLIP
+        ):  # a binary decision_function is positive for classes_[1]
+            scores = -scores
+        roc = _roc(
+            feats.y == SLIP,
+            scores,
+            (row.get("fpr", math.nan), row.get("tpr", math.nan)),
+            "frames",
+        )
+        if roc is not None:
+            row["roc_auc"] = roc["auc"]
+    search = None
+    history = (view.metrics.get("search") or {}).get("history")
+    if history:
+        search = pd.DataFrame(history)[["number", "value"]]
+        row["search_trials"] = len(search)
+    return Evaluation(
+        row=row,
+        confusion=(labels, cm),
+        roc=roc,
+        delays_ms=delays,
+        split=view.metrics["split"],
+        search=search,
+    )
+
+
+# -- window classification ------------------------------------------------------------------
+
+
+def adapt_windows(view: RunView) -> Evaluation:
+    """Slip type / direction from windows (:class:`~slipkit.train.tasks.slip_type.WindowClassification`)."""
+    m = view.metrics
+    test = m["test"]
+    labels = [str(x) for x in test["labels"]]
+    cm = np.asarray(test["confusion"])
+    row: dict[str, Any] = {
+        "accuracy": float(test["accuracy"]),
+        "balanced_accuracy": float(test["balanced_accuracy"]),
+        "f1": float(test["f1_macro"]),
+    }
+    roc = None
+    if len(labels) == 2:
+        row.update(
+            {
+                k: v
+                for k, v in binary_rates(cm).items()
+                if k in ("tpr", "tnr", "fpr", "fnr")
+            }
+        )
+        preds = pd.read_csv(view.folder / "test_predictions.csv")
+        if "in_span" in preds:
+            preds = preds[preds["in_span"].astype(bool)]
+        column = f"p_{labels[1]}"
+        if column in preds:
+            roc = _roc(
+                (preds["label"].astype(str) == labels[1]).to_numpy(),
+                preds[column].to_numpy(float),
+                (row["fpr"], row["tpr"]),
+                f"windows ({labels[1]} positive)",
+            )
+            if roc is not None:
+                row["roc_auc"] = roc["auc"]
+    window = m["window"]
+    row.update(
+        window_frames=int(window["frames"]),
+        window_ms=float(window["ms"]),
+        decision_frames=int(window["frames"]),
+    )
+    vs_time = None
+    path = view.folder / "accuracy_vs_time.csv"
+    if path.is_file():
+        curve = pd.read_csv(path)
+        found = [c for c in ("accuracy_model", "model") if c in curve.columns]
+        if found:
+            vs_time = curve[["t_rel_s", found[0]]].rename(
+                columns={found[0]: "accuracy"}
+            )
+    vs_width = None
+    if m.get("accuracy_vs_width"):
+        vs_width = pd.DataFrame(m["accuracy_vs_width"])[["ms", "accuracy"]]
+    return Evaluation(
+        row=row,
+        confusion=(labels, cm),
+        roc=roc,
+        vs_time=vs_time,
+        vs_width=vs_width,
+        split=m["split"],
+    )
+
+
+# -- stream detectors -----------------------------------------------------------------------
+
+
+def adapt_detection(view: RunView) -> Evaluation:
+    """Analytic stream detectors (:class:`~slipkit.train.tasks.detection.StreamDetection`)."""
+    task: Any = view.task
+    m = view.metrics
+    test = m["test"]
+    s = test["samples"]
+    cm = np.array([[s["tn"], s["fp"]], [s["fn"], s["tp"]]])
+    row: dict[str, Any] = binary_rates(cm)
+    row["roc_auc"] = _num(s.get("auc"))
+    trials = pd.read_csv(view.folder / "test_trials.csv")
+    trials = trials[trials["detector"] == m["name"]] if "detector" in trials else trials
+    slips = trials[trials["onset_s"].notna()]
+    latency = slips["latency_ms"].to_numpy(float)
+    delays = [float(v) for v in latency if math.isfinite(v)]
+    ev = test["events"]
+    rec_rate = float(view.dataset.streams[task.stream].rate_hz or math.nan)
+    minutes = s["n_neg"] / rec_rate / 60.0
+    # A false alarm is a non-slip event unit (negative_window_s of non-slip data) that fired.
+    row.update(
+        delay_ms=float(np.median(delays)) if delays else math.nan,
+        missed=int(len(slips) - len(delays)),
+        n_slips=len(slips),
+        false_alarms_per_min=ev["fp"] / minutes if minutes else math.nan,
+        # event level (the papers' unit): one unit per slip, one per negative window
+        event_tpr=_num(ev.get("tpr")),
+        event_tnr=_num(ev.get("tnr")),
+        event_auc=_num(ev.get("auc")),
+    )
+    window = _detector_window(view.model)
+    row.update(
+        window_frames=window,
+        window_ms=window * 1000.0 / rec_rate,
+        decision_frames=window,
+    )
+    roc = None
+    test_ds = view.dataset.subset(list(m["split"]["test"]))
+    rec = task.recordings(test_ds, task.stream, task.channels)
+    scores = np.asarray(view.model.decision_function(rec.X, segments=rec.segments))
+    roc = _roc(rec.y > 0, scores, (row["fpr"], row["tpr"]), "samples")
+    return Evaluation(
+        row=row,
+        confusion=(["no slip", "slip"], cm),
+        roc=roc,
+        delays_ms=delays,
+        split=m["split"],
+    )
+
+
+def _detector_window(model: Any) -> int:
+    """Samples a detector reads before its first decision (its block / window / span)."""
+    p = model.get_params()
+    for key in ("window", "span"):
+        if isinstance(p.get(key), int):
+            return int(p[key])
+    if isinstance(p.get("block"), int):
+        return 2 * int(p["block"])  # a backward difference of two block means
+    return 1
+
+
+# -- force regression ---------------------------------------------------------------------
+
+
+def adapt_force(view: RunView) -> Evaluation:
+    """BioTac force (N) per axis (:class:`~slipkit.train.tasks.force.ForceRegression`)."""
+    m = view.metrics
+    test = m["test"]
+    row: dict[str, Any] = {
+        "rmse": float(test["rmse_mean"]),
+        "smse": float(test["smse_mean"]),
+        "window_frames": 1,
+        "decision_frames": 1,
+    }
+    for axis, v in test["rmse"].items():
+        row[f"rmse_{axis}"] = float(v)
+    for axis, v in test["smse"].items():
+        row[f"smse_{axis}"] = float(v)
+    task: Any = view.task
+    rate = view.dataset.streams[task.stream].rate_hz
+    row["window_ms"] = 1000.0 / float(rate) if rate else math.nan
+    return Evaluation(row=row, split=m["split"])
+
+
+# -- SlipTack ------------------------------------------------------------------------------
+
+
+def adapt_sliptack_speed(view: RunView) -> Evaluation:
+    """SlipTack speed (mm/s) from the stick-slip frequency (:class:`SlipTackSpeed`)."""
+    m = view.metrics
+    overall = m["test"]["overall"]
+    row: dict[str, Any] = {
+        "rmse": _num(overall["rmse_mm_s"]),
+        "rmse_speed": _num(overall["rmse_mm_s"]),
+    }
+    model = view.model
+    if isinstance(model, Mapping):  # the speed task fits one estimator per material
+        model = next(iter(model.values()))
+    p = model.get_params()
+    window = int(p.get("window", 1))
+    rate = float(p.get("rate_hz", math.nan))
+    row.update(
+        window_frames=window, window_ms=window * 1000.0 / rate, decision_frames=window
+    )
+    return Evaluation(row=row, split=m["split"])
+
+
+def adapt_sliptack_accel(view: RunView) -> Evaluation:
+    """SlipTack drop acceleration (m/s^2) (:class:`SlipTackAccel`): the estimator's feature."""
+    m = view.metrics
+    p = view.model.get_params()
+    feature = str(p.get("feature", "deflection"))
+    test = m["test"][feature]
+    row: dict[str, Any] = {
+        "rmse": _num(test["rmse_m_s2"]),
+        "rmse_accel": _num(test["rmse_m_s2"]),
+    }
+    frames = (
+        int(p.get("smooth_frames", 1))
+        if feature == "deflection"
+        else int(p.get("slope_frames", 1))
+        + int((p.get("speed") or {}).get("window", 0))
+    )
+    rate = float(p.get("rate_hz", math.nan))
+    row.update(
+        window_frames=frames, window_ms=frames * 1000.0 / rate, decision_frames=frames
+    )
+    return Evaluation(row=row, split=m["split"])
+
+
+# -- DAVIS -----------------------------------------------------------------------------------
+
+
+def adapt_davis(view: RunView) -> Evaluation:
+    """DAVIS 20 ms bins (:class:`~slipkit.train.tasks.davis.DavisRelease`): pooled TP / FP / FN."""
+    m = view.metrics
+    pooled = m["test"]["pooled"]
+    tp, fp, fn = float(pooled["tp"]), float(pooled["fp"]), float(pooled["fn"])
+    lat = m["test"]["latency_ms"]
+    row: dict[str, Any] = {
+        "f1": _num(pooled["f1"]),
+        "tpr": _num(pooled["sensitivity"]),
+        "fnr": fn / (tp + fn) if tp + fn else math.nan,
+        "delay_ms": _num(lat.get("median")),
+        "missed": int(lat.get("missed", 0)),
+        "n_slips": int(m["test"]["n_trials"]),
+    }
+    frame_s = float(view.model.get_params().get("frame_s", math.nan))
+    delays: list[float] = []
+    trials_path, frames_path = (
+        view.folder / "davis_trials.csv",
+        view.folder / "test_frames.csv",
+    )
+    if trials_path.is_file() and frames_path.is_file():
+        t = pd.read_csv(trials_path)
+        delays = [float(v) for v in t["latency_ms"] if math.isfinite(float(v))]
+        # Non-slip time: each test trial's recorded span minus its slip (onset -> end).
+        span = pd.read_csv(frames_path).groupby("trial_id")["t_end_s"].max()
+        slip = (t["end_s"] - t["onset_s"]).clip(lower=0).sum()
+        minutes = (float(span.sum()) - float(slip)) / 60.0
+        # The task scores bins, not alarms: a false-positive bin is the alarm counted here.
+        row["false_alarms_per_min"] = fp / minutes if minutes > 0 else math.nan
+    row.update(window_frames=1, window_ms=frame_s * 1000.0, decision_frames=1)
+    return Evaluation(row=row, delays_ms=delays, split=m["split"])
+
+
+def _register_builtin() -> None:
+    from slipkit.train.tasks.davis import DavisRelease
+    from slipkit.train.tasks.detection import StreamDetection
+    from slipkit.train.tasks.force import ForceRegression
+    from slipkit.train.tasks.slip_type import WindowClassification
+    from slipkit.train.tasks.sliptack import SlipTackAccel, SlipTackSpeed
+    from slipkit.train.tasks.tactip import TacTipFrames
+
+    register_adapter(TacTipFrames, adapt_tactip)
+    register_adapter(WindowClassification, adapt_windows)
+    register_adapter(StreamDetection, adapt_detection)
+    register_adapter(ForceRegression, adapt_force)
+    register_adapter(SlipTackSpeed, adapt_sliptack_speed)
+    register_adapter(SlipTackAccel, adapt_sliptack_accel)
+    register_adapter(DavisRelease, adapt_davis)
+
+
+_register_builtin()
+
+__all__ = [
+    "ROW_COLUMNS",
+    "Evaluation",
+    "RunView",
+    "adapt",
+    "binary_rates",
+    "register_adapter",
+]

@@ -1,0 +1,305 @@
+"""``slipkit compare comparison=<family>``: learned against analytic, accuracy against its cost.
+
+Composes ``configs/compare.yaml``; the ``comparison`` group
+(``configs/comparison/<family>.yaml``) names the data (a scene, or a source and a raw
+recording), the task, and the estimators (learned models from ``configs/model``,
+analytic detectors from ``configs/detector``). Each estimator runs through
+``slipkit train``'s own code path (:func:`slipkit.train.commands.train_main`) with the
+same task and the same seed, so every task splits identically (checked: the split
+each run records must be equal); its run folder is kept under ``<out>/runs/``. A
+per-task adapter (:mod:`slipkit.compare.adapters`) reduces each run's metrics to one
+unified row; :mod:`slipkit.compare.costs` adds the fit time and the compute per
+frame of the exported bundle through the runtime loop. The output folder
+(``runs/compare/<name>/<UTC time>`` or ``out=``, written atomically) holds
+``report.md``, ``metrics.csv`` and the PNGs; the report's path is printed last.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import logging
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+from hydra.utils import get_class
+from omegaconf import DictConfig, OmegaConf
+
+from slipkit._files import atomic_dir
+from slipkit.compare import plots
+from slipkit.compare.adapters import Evaluation, RunView, adapt
+from slipkit.compare.costs import DeployCost, FitTimer, deploy_cost, quiet_console
+from slipkit.compare.report import write_report
+from slipkit.compare.table import build_table
+from slipkit.errors import SlipkitError
+from slipkit.train.runs import new_run_dir
+
+log = logging.getLogger("slipkit.compare")
+
+
+@dataclass
+class Comparison:
+    """A finished comparison.
+
+    Attributes
+    ----------
+    folder : Path
+        The output folder (report.md, metrics.csv, PNGs, runs/).
+    report : Path
+        ``folder / "report.md"``.
+    table : DataFrame
+        The unified table (``metrics.csv``).
+    evaluations : dict
+        Estimator name -> :class:`~slipkit.compare.adapters.Evaluation`.
+    costs : dict
+        Estimator name -> :class:`~slipkit.compare.costs.DeployCost`.
+    """
+
+    folder: Path
+    report: Path
+    table: pd.DataFrame
+    evaluations: dict[str, Evaluation] = field(default_factory=dict)
+    costs: dict[str, DeployCost] = field(default_factory=dict)
+
+
+def _is_analytic(name: str, node: dict[str, Any], analytic: list[str]) -> bool:
+    return name in analytic or str(node.get("_target_", "")).startswith(
+        "slipkit.baselines."
+    )
+
+
+def _train_config(
+    comp: dict[str, Any],
+    est: str,
+    node: dict[str, Any],
+    *,
+    analytic: bool,
+    seed: int,
+    data_root: str,
+    run_dir: Path,
+) -> DictConfig:
+    """The ``slipkit train`` config of one estimator of the comparison."""
+    task = dict(comp["task"])
+    task.update((comp.get("task_overrides") or {}).get(est) or {})
+    cfg = OmegaConf.create(
+        {
+            "name": f"{comp['name']}-{est}",
+            "seed": seed,
+            "runs_dir": "runs",
+            "run_dir": str(run_dir),
+            "overwrite": False,
+            "data_root": data_root,
+            "scene": comp.get("scene"),
+            "source": comp.get("source"),
+            "model": None if analytic else node,
+            "detector": node if analytic else None,
+            "task": task,
+            "dataset": comp["dataset"],
+        }
+    )
+    return cfg
+
+
+def _container(node: Any) -> dict[str, Any]:
+    """A resolved plain-dict copy of a config node."""
+    out = OmegaConf.to_container(node, resolve=True)
+    if not isinstance(out, dict):
+        raise SlipkitError(
+            f"expected a mapping in the config, got {type(out).__name__}"
+        )
+    return {str(k): v for k, v in out.items()}
+
+
+def _command(cfg: DictConfig) -> str:
+    from hydra.core.hydra_config import HydraConfig
+
+    if HydraConfig.initialized():
+        overrides = list(HydraConfig.get().overrides.task)
+        return " ".join(["slipkit compare", *overrides])
+    given = cfg.get("command")
+    if given:
+        return str(given)
+    return "slipkit compare " + " ".join(sys.argv[1:])
+
+
+def _run_one(
+    comp: dict[str, Any],
+    est: str,
+    node: dict[str, Any],
+    cfg: DictConfig,
+    runs: Path,
+    folder: Path,
+    cost_cfg: dict[str, Any],
+    analytic: list[str],
+    seed: int,
+) -> tuple[dict[str, Any], Evaluation, DeployCost, str]:
+    """Train (or calibrate) one estimator through the task, adapt its metrics, export and time it."""
+    from slipkit.train.commands import build, train_main
+    from slipkit.train.data import training_dataset
+    from slipkit.train.runs import read_run
+
+    kind_analytic = _is_analytic(est, node, analytic)
+    tcfg = _train_config(
+        comp,
+        est,
+        node,
+        analytic=kind_analytic,
+        seed=seed,
+        data_root=str(cfg.get("data_root", "")),
+        run_dir=runs / est,
+    )
+    timer = FitTimer()
+    buf = io.StringIO()
+    t0 = time.perf_counter()
+    with (
+        timer.patch(get_class(str(node["_target_"]))),
+        contextlib.redirect_stdout(buf),
+        quiet_console(),
+    ):
+        train_main(tcfg)
+    task_s = time.perf_counter() - t0
+    summary = "\n".join(buf.getvalue().splitlines()[:-1])  # last line: the folder
+    run = read_run(runs / est)
+    task = build(run.config.task, "task")
+    view = RunView(
+        task=task,
+        metrics=json.loads((runs / est / "metrics.json").read_text()),
+        folder=runs / est,
+        model=run.model,
+        dataset=training_dataset(run.config),
+    )
+    ev = adapt(view)
+    if bool(cost_cfg.get("export", True)):
+        cost = deploy_cost(
+            runs / est,
+            folder / "bundles" / est,
+            max_frames=int(cost_cfg.get("max_frames", 2000)),
+            warmup=int(cost_cfg.get("warmup", 50)),
+            keep=bool(cost_cfg.get("keep_bundles", False)),
+        )
+    else:
+        cost = DeployCost(False, "not measured (cost.export=false)")
+    row = {
+        "estimator": est,
+        "kind": "analytic" if kind_analytic else "learned",
+        "class": str(node["_target_"]).rsplit(".", 1)[-1],
+        **ev.row,
+        "fit_s": timer.total_s,
+        "fit_calls": len(timer.calls),
+        "task_s": task_s,
+        "p50_us": cost.p50_us,
+        "p99_us": cost.p99_us,
+        "budget_p99_us": cost.budget_p99_us,
+        "frame_period_us": cost.frame_period_us,
+        "within_budget": cost.within_budget,
+        "export": cost.note,
+    }
+    return row, ev, cost, summary
+
+
+def run_comparison(
+    cfg: DictConfig, folder: Path, *, progress: bool = True
+) -> Comparison:
+    """Run every estimator of ``cfg.comparison`` into ``folder`` and write the report there."""
+    from tqdm import tqdm
+
+    start = time.perf_counter()
+    comp = _container(cfg.comparison)
+    estimators: dict[str, dict[str, Any]] = dict(comp.get("estimators") or {})
+    if not estimators:
+        raise SlipkitError(f"comparison {comp.get('name')!r} lists no estimators")
+    seed = int(cfg.seed)
+    primary = str(comp.get("primary", "accuracy"))
+    analytic = [str(a) for a in comp.get("analytic") or []]
+    cost_cfg = _container(cfg.get("cost") or OmegaConf.create({}))
+    runs = folder / "runs"
+    runs.mkdir(parents=True, exist_ok=True)
+    rows: list[dict[str, Any]] = []
+    evals: dict[str, Evaluation] = {}
+    costs: dict[str, DeployCost] = {}
+    summaries: dict[str, str] = {}
+    for est, node in tqdm(
+        list(estimators.items()),
+        desc=f"compare {comp['name']}",
+        unit="estimator",
+        disable=not progress,
+    ):
+        with quiet_console():
+            row, ev, cost, summary = _run_one(
+                comp, est, node, cfg, runs, folder, cost_cfg, analytic, seed
+            )
+        rows.append(row)
+        evals[est], costs[est], summaries[est] = ev, cost, summary
+    if not bool(cost_cfg.get("keep_bundles", False)):
+        import shutil
+
+        shutil.rmtree(folder / "bundles", ignore_errors=True)
+    splits = {json.dumps(e.split, sort_keys=True, default=str) for e in evals.values()}
+    if len(splits) != 1:
+        raise SlipkitError(
+            f"comparison {comp['name']!r}: the estimators' tasks recorded different "
+            "splits; a comparison needs one split (same task settings and seed)"
+        )
+    split_note = (
+        f"All {len(evals)} estimators were scored on one identical split (seed {seed}; "
+        "checked on the split each run recorded)."
+    )
+    df = build_table(rows, primary)
+    df.to_csv(folder / "metrics.csv", index=False)
+    made = {
+        "pareto": plots.plot_pareto(
+            df, primary, f"{comp['name']}: {primary} vs compute", folder / "pareto.png"
+        ),
+        "accuracy_vs_time": plots.plot_curves(
+            evals, "vs_time", folder / "accuracy_vs_time.png"
+        ),
+        "accuracy_vs_width": plots.plot_curves(
+            evals, "vs_width", folder / "accuracy_vs_width.png"
+        ),
+        "roc": plots.plot_roc(evals, folder / "roc.png"),
+        "delays": plots.plot_delays(evals, folder / "delays.png"),
+        "latency": plots.plot_latency(costs, folder / "latency.png"),
+        "confusion": plots.plot_confusions(evals, folder / "confusion.png"),
+        "search": plots.plot_search(evals, folder / "search_trials.png"),
+    }
+    config_yaml = OmegaConf.to_yaml(
+        {k: v for k, v in _container(cfg).items() if k != "hydra"}
+    )
+    report = write_report(
+        folder,
+        name=str(comp["name"]),
+        description=str(comp.get("description", "")),
+        primary=primary,
+        df=df,
+        plots=made,
+        command=_command(cfg),
+        config_yaml=config_yaml,
+        split_note=split_note,
+        summaries=summaries,
+        seconds=time.perf_counter() - start,
+    )
+    return Comparison(folder, report, df, evals, costs)
+
+
+def compare_main(cfg: DictConfig) -> Path:
+    """Run the comparison ``cfg.comparison``; print the report's path last and return it."""
+    target = (
+        Path(str(cfg.out))
+        if cfg.get("out")
+        else new_run_dir(Path(str(cfg.runs_dir)), str(cfg.name))
+    )
+    with atomic_dir(target, overwrite=bool(cfg.get("overwrite", False))) as tmp:
+        result = run_comparison(cfg, tmp, progress=bool(cfg.get("progress", True)))
+    cols = ["estimator", "kind", "score", "p50_us", "p99_us", "export"]
+    print(result.table[cols].to_string(index=False))
+    report = target / "report.md"
+    print(report)
+    return report
+
+
+__all__ = ["Comparison", "compare_main", "run_comparison"]

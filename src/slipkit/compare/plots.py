@@ -1,0 +1,254 @@
+"""The comparison's figures (matplotlib, Agg backend): one PNG per question the report asks."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+
+from slipkit.compare.adapters import Evaluation
+
+COLORS = {"learned": "tab:blue", "analytic": "tab:orange"}
+
+
+def _save(fig: Any, path: Path) -> Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_pareto(df: pd.DataFrame, primary: str, title: str, path: Path) -> Path | None:
+    """Score against p50 compute per frame (us, log), the Pareto front joined; budget lines."""
+    ok = df[
+        np.isfinite(df["p50_us"].to_numpy(float))
+        & np.isfinite(df["score"].to_numpy(float))
+    ]
+    if ok.empty:
+        return None
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    for kind, color in COLORS.items():
+        part = ok[ok["kind"] == kind]
+        ax.scatter(part["p50_us"], part["score"], c=color, s=40, label=kind, zorder=3)
+    for _, r in ok.iterrows():
+        ax.annotate(
+            str(r["estimator"]),
+            (r["p50_us"], r["score"]),
+            textcoords="offset points",
+            xytext=(5, 4),
+            fontsize=8,
+        )
+    front = ok[ok["pareto"].astype(bool)].sort_values("p50_us")
+    ax.step(
+        front["p50_us"],
+        front["score"],
+        where="post",
+        color="k",
+        lw=1.2,
+        label="Pareto front",
+        zorder=2,
+    )
+    ax.scatter(
+        front["p50_us"],
+        front["score"],
+        s=140,
+        facecolors="none",
+        edgecolors="k",
+        zorder=4,
+    )
+    budgets = sorted(set(ok["budget_p99_us"].dropna().round(3)))
+    for b in budgets:
+        ax.axvline(b, color="tab:red", ls="--", lw=1)
+        ax.text(
+            b,
+            ax.get_ylim()[0],
+            f" p99 budget {b:g} us",
+            color="tab:red",
+            fontsize=8,
+            rotation=90,
+            va="bottom",
+            ha="right",
+        )
+    ax.set_xscale("log")
+    ax.set_xlabel("compute per frame, p50 (us, ONNX runtime loop, 1 thread)")
+    from slipkit.compare.table import score_of
+
+    negated = score_of({primary: 1.0}, primary) < 0
+    ax.set_ylabel(f"-{primary} (score: higher is better)" if negated else primary)
+    ax.set_title(title, fontsize=10)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8, loc="best")
+    return _save(fig, path)
+
+
+def plot_curves(evals: Mapping[str, Evaluation], which: str, path: Path) -> Path | None:
+    """Accuracy against time from onset (``vs_time``) or against window length (``vs_width``)."""
+    curves = {
+        k: getattr(e, which) for k, e in evals.items() if getattr(e, which) is not None
+    }
+    if not curves:
+        return None
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    xcol, xlabel = (
+        ("t_rel_s", "window end relative to slip onset (s)")
+        if which == "vs_time"
+        else ("ms", "window length (ms)")
+    )
+    for name, c in curves.items():
+        ax.plot(
+            c[xcol],
+            c["accuracy"],
+            marker="o" if which == "vs_width" else None,
+            ms=4,
+            label=name,
+        )
+    if which == "vs_time":
+        ax.axvline(0.0, color="k", lw=0.8, ls=":")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("test accuracy")
+    ax.set_ylim(-0.02, 1.02)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return _save(fig, path)
+
+
+def plot_roc(evals: Mapping[str, Evaluation], path: Path) -> Path | None:
+    """ROC curves on the test side, each estimator's chosen operating point marked."""
+    rocs = {k: e.roc for k, e in evals.items() if e.roc is not None}
+    if not rocs:
+        return None
+    fig, ax = plt.subplots(figsize=(5.0, 4.6))
+    for name, r in rocs.items():
+        (line,) = ax.plot(
+            r["fpr"],
+            r["tpr"],
+            lw=1.3,
+            label=f"{name} (AUC {r['auc']:.3f}, {r['unit']})",
+        )
+        pt = r.get("point")
+        if pt is not None and all(math.isfinite(v) for v in pt):
+            ax.plot(*pt, "o", color=line.get_color(), ms=7, mec="k")
+    ax.plot([0, 1], [0, 1], color="0.6", lw=0.8, ls=":")
+    ax.set_xlabel("false positive rate")
+    ax.set_ylabel("true positive rate")
+    ax.set_title("ROC (dots: the chosen threshold)", fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="lower right")
+    return _save(fig, path)
+
+
+def plot_delays(evals: Mapping[str, Evaluation], path: Path) -> Path | None:
+    """Detection delay from the true onset (ms) of every detected test slip, per estimator."""
+    data = {k: e.delays_ms for k, e in evals.items() if e.delays_ms}
+    if not data:
+        return None
+    fig, ax = plt.subplots(figsize=(6.4, 0.6 + 0.55 * len(data) + 1.2))
+    names = list(data)
+    ax.boxplot(
+        [data[n] for n in names],
+        orientation="horizontal",
+        tick_labels=names,
+        showfliers=False,
+    )
+    rng = np.random.default_rng(0)  # jitter only; fixed so the figure is reproducible
+    for i, n in enumerate(names, start=1):
+        v = np.asarray(data[n])
+        ax.scatter(v, i + rng.uniform(-0.15, 0.15, len(v)), s=10, alpha=0.6)
+    ax.axvline(0.0, color="k", lw=0.8, ls=":")
+    ax.set_xlabel("detection delay after the true slip onset (ms)")
+    ax.grid(alpha=0.3, axis="x")
+    return _save(fig, path)
+
+
+def plot_latency(costs: Mapping[str, Any], path: Path) -> Path | None:
+    """Per-decision latency histograms (us) of the exported estimators, the p99 budget as a line."""
+    data = {k: c for k, c in costs.items() if c.exported and len(c.latency_us)}
+    if not data:
+        return None
+    fig, axes = plt.subplots(
+        len(data), 1, figsize=(6.4, 1.2 + 1.5 * len(data)), squeeze=False
+    )
+    for ax, (name, c) in zip(axes[:, 0], data.items(), strict=True):
+        lat = c.latency_us
+        hi = max(float(np.percentile(lat, 99.5)), c.budget_p99_us) * 1.1
+        ax.hist(
+            np.clip(lat, 0, hi), bins=60, range=(0, hi), color="tab:blue", alpha=0.8
+        )
+        ax.axvline(
+            c.budget_p99_us,
+            color="tab:red",
+            ls="--",
+            lw=1.2,
+            label=f"p99 budget {c.budget_p99_us:g} us",
+        )
+        ax.axvline(c.p99_us, color="k", ls=":", lw=1.2, label=f"p99 {c.p99_us:.1f} us")
+        ax.set_title(f"{name}: p50 {c.p50_us:.1f} us, {len(lat)} decisions", fontsize=9)
+        ax.legend(fontsize=7)
+    axes[-1, 0].set_xlabel("frame arrival -> decision (us)")
+    return _save(fig, path)
+
+
+def plot_search(evals: Mapping[str, Evaluation], path: Path) -> Path | None:
+    """Best cross-validated score so far against the number of in-run search trials."""
+    data = {k: e.search for k, e in evals.items() if e.search is not None}
+    if not data:
+        return None
+    fig, ax = plt.subplots(figsize=(6.0, 3.6))
+    for name, h in data.items():
+        v = h["value"].to_numpy(float)
+        ax.plot(h["number"] + 1, v, "o", ms=3, alpha=0.5)
+        ax.plot(h["number"] + 1, np.fmax.accumulate(v), label=f"{name} (best so far)")
+    ax.set_xlabel("search trials (Optuna TPE)")
+    ax.set_ylabel("cross-validated score (training side)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return _save(fig, path)
+
+
+def plot_confusions(evals: Mapping[str, Evaluation], path: Path) -> Path | None:
+    """Test confusion matrices (rows: true class, columns: predicted), one panel per estimator."""
+    data = {k: e.confusion for k, e in evals.items() if e.confusion is not None}
+    if not data:
+        return None
+    n = len(data)
+    fig, axes = plt.subplots(1, n, figsize=(3.2 * n, 3.2), squeeze=False)
+    for ax, (name, (labels, cm)) in zip(axes[0], data.items(), strict=True):
+        cm = np.asarray(cm, dtype=float)
+        norm = cm / np.maximum(cm.sum(axis=1, keepdims=True), 1)
+        ax.imshow(norm, cmap="Blues", vmin=0, vmax=1)
+        for i in range(cm.shape[0]):
+            for j in range(cm.shape[1]):
+                ax.text(
+                    j,
+                    i,
+                    f"{int(cm[i, j])}",
+                    ha="center",
+                    va="center",
+                    fontsize=8,
+                    color="white" if norm[i, j] > 0.5 else "black",
+                )
+        ax.set_xticks(range(len(labels)), labels, rotation=45, fontsize=7)
+        ax.set_yticks(range(len(labels)), labels, fontsize=7)
+        ax.set_title(name, fontsize=9)
+        ax.set_xlabel("predicted", fontsize=8)
+    axes[0, 0].set_ylabel("true", fontsize=8)
+    return _save(fig, path)
+
+
+__all__ = [
+    "plot_confusions",
+    "plot_curves",
+    "plot_delays",
+    "plot_latency",
+    "plot_pareto",
+    "plot_roc",
+    "plot_search",
+]

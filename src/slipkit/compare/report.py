@@ -1,0 +1,230 @@
+"""``report.md``: the comparison's tables, plots, verdict, exact command and resolved config."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from slipkit.compare.table import best_row, score_of
+
+#: (column, header, format) of the report's main table
+MAIN = (
+    ("estimator", "estimator", "{}"),
+    ("kind", "kind", "{}"),
+    ("accuracy", "acc", "{:.3f}"),
+    ("balanced_accuracy", "bal. acc", "{:.3f}"),
+    ("f1", "F1", "{:.3f}"),
+    ("tpr", "TPR", "{:.3f}"),
+    ("tnr", "TNR", "{:.3f}"),
+    ("roc_auc", "ROC AUC", "{:.3f}"),
+    ("rmse", "RMSE", "{:.3g}"),
+    ("smse", "SMSE", "{:.3g}"),
+    ("event_tpr", "event TPR", "{:.3f}"),
+    ("event_tnr", "event TNR", "{:.3f}"),
+    ("event_auc", "event AUC", "{:.3f}"),
+    ("delay_ms", "delay (ms, median)", "{:.1f}"),
+    ("missed", "missed", "{:.0f}"),
+    ("false_alarms_per_min", "false alarms / min", "{:.2f}"),
+)
+COST = (
+    ("estimator", "estimator", "{}"),
+    ("fit_s", "fit (s, all fits)", "{:.3g}"),
+    ("fit_calls", "fits", "{:.0f}"),
+    ("window_frames", "window (frames)", "{:.0f}"),
+    ("window_ms", "window (ms)", "{:.3g}"),
+    ("decision_frames", "frames to a decision", "{:.0f}"),
+    ("p50_us", "p50 (us)", "{:.1f}"),
+    ("p99_us", "p99 (us)", "{:.1f}"),
+    ("budget_p99_us", "p99 budget (us)", "{:.4g}"),
+    ("within_budget", "within budget", "{}"),
+    ("pareto", "Pareto", "{}"),
+    ("export", "deployment", "{}"),
+)
+
+
+def fmt(value: Any, spec: str) -> str:
+    """One table cell: blank for missing values."""
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return ""
+    if isinstance(value, bool) or spec == "{}":
+        return (
+            {True: "yes", False: "no"}.get(value, str(value))
+            if isinstance(value, bool)
+            else str(value)
+        )
+    try:
+        return spec.format(float(value))
+    except (TypeError, ValueError):
+        return str(value)
+
+
+def markdown_table(df: pd.DataFrame, spec: Sequence[tuple[str, str, str]]) -> str:
+    """``df`` as a Markdown table of the columns in ``spec`` that hold any value."""
+    cols = [
+        (c, h, f)
+        for c, h, f in spec
+        if c in df
+        and (c == "estimator" or df[c].map(lambda v: fmt(v, "{}") != "").any())
+    ]
+    lines = [
+        "| " + " | ".join(h for _, h, _ in cols) + " |",
+        "|" + "|".join("---" for _ in cols) + "|",
+    ]
+    for _, r in df.iterrows():
+        lines.append("| " + " | ".join(fmt(r[c], f) for c, _, f in cols) + " |")
+    return "\n".join(lines)
+
+
+def verdict(df: pd.DataFrame, primary: str) -> list[str]:
+    """Which estimator to deploy, and what each step along the Pareto front costs."""
+    best = best_row(df)
+    if best is None:
+        return ["No estimator produced a score."]
+    out = [
+        f"**Deploy `{best['estimator']}`** ({best['kind']}, {best['class']}): {primary} "
+        f"{fmt(best[primary], '{:.4g}')}"
+        + (
+            f", p99 {best['p99_us']:.1f} us against a {best['budget_p99_us']:.4g} us budget"
+            if math.isfinite(float(best["p99_us"]))
+            else f" ({best['export']})"
+        )
+        + (
+            f", median detection delay {best['delay_ms']:.1f} ms"
+            if math.isfinite(float(best["delay_ms"]))
+            else ""
+        )
+        + "."
+    ]
+    front = df[df["pareto"].astype(bool)].sort_values("p50_us")
+    if len(front) > 1:
+        out.append("")
+        out.append(
+            "Along the Pareto front (cheapest first), what the next step of accuracy costs:"
+        )
+        out.append("")
+        prev = None
+        for _, r in front.iterrows():
+            if prev is not None:
+                d_score = float(r["score"]) - float(prev["score"])
+                d_us = float(r["p50_us"]) - float(prev["p50_us"])
+                d_delay = float(r["delay_ms"]) - float(prev["delay_ms"])
+                delay = (
+                    f", {d_delay:+.1f} ms detection delay"
+                    if math.isfinite(d_delay)
+                    else ""
+                )
+                if score_of({primary: 1.0}, primary) < 0:  # lower is better: own units
+                    gain = f"{-d_score:+.4g} {primary}"
+                    per = f" ({d_us / d_score:.3g} us per unit)" if d_score > 0 else ""
+                else:  # a rate in [0, 1]: percentage points
+                    gain = f"{d_score * 100:+.2f} points of {primary}"
+                    per = (
+                        f" ({d_us / (d_score * 100):.2f} us per point)"
+                        if d_score > 0
+                        else ""
+                    )
+                out.append(
+                    f"- `{prev['estimator']}` -> `{r['estimator']}`: {gain} for "
+                    f"{d_us:+.1f} us per frame{per}{delay}"
+                )
+            prev = r
+    return out
+
+
+def write_report(
+    folder: Path,
+    *,
+    name: str,
+    description: str,
+    primary: str,
+    df: pd.DataFrame,
+    plots: Mapping[str, Path | None],
+    command: str,
+    config_yaml: str,
+    split_note: str,
+    summaries: Mapping[str, str],
+    seconds: float,
+) -> Path:
+    """Write ``folder/report.md`` and return its path."""
+    reg_cols = [c for c in df.columns if c.startswith(("rmse_", "smse_"))]
+    lines = [
+        f"# Comparison: {name}",
+        "",
+        description.strip(),
+        "",
+        f"Estimators: {len(df)}; primary score: `{primary}` (higher is better"
+        + (
+            ", so lower-is-better metrics are negated in `score`"
+            if primary in {"rmse", "smse"} or primary.startswith(("rmse", "smse"))
+            else ""
+        )
+        + f"). {split_note} Wall time {seconds:.0f} s.",
+        "",
+        "## Verdict",
+        "",
+        *verdict(df, primary),
+        "",
+        "## Accuracy",
+        "",
+        markdown_table(df, MAIN),
+        "",
+    ]
+    if reg_cols:
+        spec = [("estimator", "estimator", "{}")] + [(c, c, "{:.4g}") for c in reg_cols]
+        lines += ["Per axis (test side):", "", markdown_table(df, spec), ""]
+    lines += ["## Cost", "", markdown_table(df, COST), ""]
+    titles = {
+        "pareto": "Accuracy against compute per frame (Pareto front)",
+        "accuracy_vs_time": "Accuracy against time relative to the slip onset",
+        "accuracy_vs_width": "Accuracy against window length",
+        "roc": "ROC curves and the chosen thresholds",
+        "delays": "Detection delay",
+        "latency": "Per-frame latency against the budget",
+        "confusion": "Confusion matrices",
+        "search": "Accuracy against the number of search trials",
+    }
+    lines += ["## Plots", ""]
+    for key, title in titles.items():
+        path = plots.get(key)
+        if path is not None:
+            lines += [f"### {title}", "", f"![{title}]({path.name})", ""]
+    lines += [
+        "## How this was made",
+        "",
+        "```",
+        command,
+        "```",
+        "",
+        "Every estimator ran through the same task (`slipkit train`'s code path) with the same seed; "
+        "its run folder is under `runs/<estimator>/` (metrics.json, the task's tables and plots). "
+        "Compute per frame: each run exported to an ONNX bundle (`slipkit export`'s functions), "
+        "its held-out replay frames pushed one by one through `slipkit.runtime.StreamLoop` "
+        "(onnxruntime, 1 thread, batch 1, after warm-up); p50 / p99 of frame arrival -> decision.",
+        "",
+        "<details><summary>Each task's own summary</summary>",
+        "",
+    ]
+    for est, text in summaries.items():
+        lines += [f"**{est}**", "", "```", text.rstrip(), "```", ""]
+    lines += [
+        "</details>",
+        "",
+        "<details><summary>Resolved config</summary>",
+        "",
+        "```yaml",
+        config_yaml.rstrip(),
+        "```",
+        "",
+        "</details>",
+        "",
+    ]
+    path = folder / "report.md"
+    path.write_text("\n".join(lines), encoding="utf-8")
+    return path
+
+
+__all__ = ["markdown_table", "verdict", "write_report"]
