@@ -19,6 +19,7 @@ from __future__ import annotations
 from slipkit.export import detectors as _detectors  # noqa: F401  (registers exporters)
 from slipkit.export import force as _force  # noqa: F401
 from slipkit.export import sklearn as _sklearn  # noqa: F401
+from slipkit.export import sliptack as _sliptack  # noqa: F401
 from slipkit.export import svm as _svm  # noqa: F401
 from slipkit.export import torch as _torch  # noqa: F401
 from slipkit.export.parity import check_parity

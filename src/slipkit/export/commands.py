@@ -176,12 +176,13 @@ def export_main(cfg: DictConfig) -> Path:
     dep = deployment(task, run, dataset, options)
     if cfg.get("debounce_k") is not None:
         dep.debounce_k = int(cfg.debounce_k)
-    graph = export(run.model, opset=int(cfg.get("opset", 17)), **dep.export_options)
+    model = run.model if dep.model is None else dep.model
+    graph = export(model, opset=int(cfg.get("opset", 17)), **dep.export_options)
     input_shape = [int(s) for s in graph.input_shape[1:]]
     par: dict[str, Any] = dict(cfg.get("parity") or {})
     score_eps = None if par.get("score_eps") is None else float(par["score_eps"])
     if dep.detector:
-        report = _detector_parity(run.model, graph, dep, score_eps)
+        report = _detector_parity(model, graph, dep, score_eps)
     else:
         inputs = held_out_inputs(
             dep,
@@ -189,7 +190,7 @@ def export_main(cfg: DictConfig) -> Path:
             max_calls=None if par.get("max_calls") is None else int(par["max_calls"]),
         )
         report = check_parity(
-            run.model,
+            model,
             graph,
             inputs,
             score_eps=score_eps,
@@ -214,7 +215,7 @@ def export_main(cfg: DictConfig) -> Path:
     manifest: dict[str, Any] = {
         "name": name,
         "description": (
-            f"{type(run.model).__name__} from run {run.path.name} "
+            f"{type(model).__name__} from run {run.path.name} "
             f"({type(task).__name__}, {dataset.sensor}); " + "; ".join(dep.notes)
         ),
         "frame": dep.frame,
@@ -284,7 +285,7 @@ def export_main(cfg: DictConfig) -> Path:
         overwrite=bool(cfg.get("overwrite", False)),
     )
     print(
-        f"{name}: {type(run.model).__name__} ({type(task).__name__}) -> ONNX opset "
+        f"{name}: {type(model).__name__} ({type(task).__name__}) -> ONNX opset "
         f"{graph.opset}, input {graph.input_name} {[1, *input_shape]}, "
         f"{len(dep.preprocessing)} preprocessing step(s)"
     )

@@ -121,6 +121,9 @@ class Deployment:
     regression : dict or None
         For regressors: ``{"column": int, "axis": str, "threshold": float}``, the
         score entry and threshold of the manifest's decision.
+    model : estimator or None
+        The estimator to export and check instead of the run's saved model (e.g. one
+        estimator picked out of a per-material dict); None: the run's model.
     detector : bool
         An analytic stream detector: the graph
         (:class:`slipkit.export.detectors.DetectorGraph`) fixes ``window`` and
@@ -138,6 +141,7 @@ class Deployment:
     notes: list[str] = field(default_factory=list)
     regression: dict[str, Any] | None = None
     detector: bool = False
+    model: Any = None
 
     @property
     def frame_shape(self) -> tuple[int, ...]:
@@ -628,3 +632,76 @@ __all__ = [
     "register_deployer",
     "slip_decisions",
 ]
+
+
+# -- SlipTack speed (appended: src/slipkit/export/sliptack.py) ------------------------------
+
+
+def _deploy_sliptack_speed(
+    task: Task, run: Run, dataset: Dataset, options: Mapping[str, Any]
+) -> Deployment:
+    """``SlipTackSpeed``: raw nib samples, the whole speed estimator in the graph.
+
+    Frame = one sample of ``task.stream`` / ``task.column``; window and hop are the
+    estimator's (``window``, ``hop``: the graph is called at the batch estimator's
+    estimation instants). The run saves one estimator per training material plus
+    ``"*"`` (all training trials, the configured friction); a gripper does not know
+    the material, so ``"*"`` is deployed. A speed has no slip class: the decision is
+    :class:`slipkit.export.sliptack.SpeedSlipDetector`'s ``speed >= threshold`` with
+    the threshold from the export config's ``regression.threshold`` (mm/s; 0: slip
+    whenever a stick-slip frequency is found), class ``"1"``.
+    """
+    from slipkit.export.sliptack import SpeedSlipDetector
+    from slipkit.train.tasks.sliptack import DEFAULT, SlipTackSpeed, _split
+
+    assert isinstance(task, SlipTackSpeed)
+    models = run.model
+    est = models.get(DEFAULT) if isinstance(models, Mapping) else models
+    if est is None:
+        raise SlipkitError(
+            f"run {run.path}: the SlipTack speed model has no {DEFAULT!r} entry "
+            f"(has {sorted(models)})"
+        )
+    stream = task.stream
+    rate = _rate(dataset, stream)
+    if abs(rate - float(est.rate_hz)) > 1e-9 * rate:
+        raise SlipkitError(
+            f"stream {stream!r} runs at {rate:g} Hz but the estimator's rate_hz is "
+            f"{float(est.rate_hz):g} Hz"
+        )
+    reg = dict(options.get("regression") or {})
+    threshold = float(reg.get("threshold") or 0.0)
+    detector = SpeedSlipDetector(speed=est, threshold=threshold).fit()
+    split = run_metrics(run).get("split", {})
+    if split.get("test"):
+        test_ids = list(split["test"])
+    else:  # the task's own split (stratified by material when it can be), the run's seed
+        seed = int(run.config.get("seed", 0))
+        test_ids = list(_split(dataset, task.test_size, seed, task.group).test)
+    channels = [task.column]
+    return Deployment(
+        frame=_frame([stream], channels, int(est.window), int(est.hop), rate),
+        preprocessing=[],
+        export_options={},
+        positive="1",
+        debounce_k=int(options.get("debounce_k") or 1),
+        trials=trial_frames(dataset, test_ids, stream, channels),
+        notes=[
+            f"raw {stream!r} samples ({task.column}, mm) at {rate:g} Hz; the graph holds "
+            f"StickSlipSpeed ({est.form} form, material '*') on the last {int(est.window)} "
+            f"samples, called every {int(est.hop)} samples",
+            f"decision: speed >= {threshold:g} mm/s (regression.threshold; no estimate: "
+            "no slip)",
+        ],
+        detector=True,
+        model=detector,  # the run saved a dict of per-material estimators
+    )
+
+
+def _register_sliptack() -> None:
+    from slipkit.train.tasks.sliptack import SlipTackSpeed
+
+    register_deployer(SlipTackSpeed, _deploy_sliptack_speed)
+
+
+_register_sliptack()
