@@ -161,6 +161,50 @@ def test_nearly_cancelling_unit_vectors_have_no_mean_direction():
     np.testing.assert_allclose(expected, out, rtol=1e-6, atol=1e-6)
 
 
+@pytest.mark.parametrize(
+    "level", ["ORT_DISABLE_ALL", "ORT_ENABLE_BASIC", "ORT_ENABLE_ALL"]
+)
+def test_hand_worked_frame_is_the_same_at_every_optimisation_level(level: str):
+    """Signed zeros survive onnxruntime's graph rewrites: raw -pi stays -pi, shifted +pi stays +pi."""
+    import onnxruntime as ort
+
+    nan = np.nan
+    prev = np.r_[[0.0, 1.0, 1.0, 5.0, nan, 0.0], [2.0, 2.0, 0.0, 7.0, 1.0, 0.0]]
+    cur = np.r_[[1.0, 0.0, 0.0, 5.0, 3.0, 0.0], [2.0, 2.0, -0.0, 7.0, 1.0, 2.0]]
+    pins = np.asarray([[prev, cur]], dtype=np.float32)
+    options = ort.SessionOptions()
+    options.graph_optimization_level = getattr(ort.GraphOptimizationLevel, level)
+    for shift in (True, False):
+        graph = export_velocity_features(6, shift_angles=shift, missing_count=True)
+        session = ort.InferenceSession(
+            graph.serialize(), options, providers=["CPUExecutionProvider"]
+        )
+        out = run_graph(graph, pins, session=session)[0]
+        ref = _features_of(pins, shift_angles=shift, missing_count=True)[0]
+        # Raw angles: pins 1 and 2 at +pi and -pi (dy = +0.0, -0.0); 3 still, 4 missing.
+        np.testing.assert_allclose(ref, out, atol=1e-6)
+
+
+def test_pins_without_an_angle_get_exactly_zero_and_right_angles_exactly_half_pi():
+    """Still and missing pins give dtheta == 0.0 exactly; pins at 90 deg to the mean give +-pi/2 (float32)."""
+    # Velocities (1, 0), (1, 0), (0, 1), (0, -1), still, missing: mean direction +x.
+    prev = np.r_[[0.0, 0.0, 0.0, 0.0, 4.0, np.nan], [0.0, 0.0, 0.0, 0.0, 4.0, 0.0]]
+    cur = np.r_[[1.0, 1.0, 0.0, 0.0, 4.0, 1.0], [0.0, 0.0, 1.0, -1.0, 4.0, 0.0]]
+    pins = np.asarray([[prev, cur]], dtype=np.float32)
+    _, session = _features_session(6, "dtheta", True, False)
+    out = session.run(None, {"pins": pins})[0][0]
+    half = np.float32(np.pi / 2)
+    np.testing.assert_array_equal(
+        np.asarray([0.0, 0.0, half, -half, 0.0, 0.0], np.float32), out
+    )
+
+
+def test_default_feature_graph_stays_a_few_wide_nodes():
+    """Dispatch per node dominates at 127 pins: the default feature graph keeps <= 26 nodes."""
+    model = export_velocity_features(127).model
+    assert 26 >= len(model.graph.node)
+
+
 @functools.cache
 def _features_session(n_pins: int, variant: str, shift: bool, missing: bool):
     graph = export_velocity_features(
