@@ -228,9 +228,10 @@ def deploy_cost(
 
     try:
         bundle = export_run(run, folder / "bundle", max_frames=max_frames)
-    except (SlipkitError, TypeError, NotImplementedError, KeyError, ValueError) as exc:
+    except SlipkitError as exc:
         # Unexportable (no exporter for the class, no deployer for the task, parity
-        # failed): the comparison still reports the estimator, with the reason.
+        # failed: each an ExportError / SlipkitError): the comparison still reports the
+        # estimator, with the reason. Anything else is a bug and propagates.
         return DeployCost(False, f"not exportable: {_first_line(exc)}")
     cost = time_bundle(bundle, max_frames=max_frames, warmup=warmup)
     cost.bundle = bundle if keep else None
