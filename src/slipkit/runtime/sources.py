@@ -40,7 +40,7 @@ import zipfile
 from collections.abc import Iterator
 from pathlib import Path
 from types import TracebackType
-from typing import NamedTuple
+from typing import NamedTuple, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -232,7 +232,31 @@ class ReplaySource:
             yield Frame(i, ts, values, clock())
 
 
-class UdpSource:
+_S = TypeVar("_S", bound="_Socket")
+
+
+class _Socket:
+    """A UDP socket held in ``self.sock``, closed by :meth:`close` or a ``with`` block."""
+
+    sock: socket.socket
+
+    def close(self) -> None:
+        """Close the socket."""
+        self.sock.close()
+
+    def __enter__(self: _S) -> _S:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+class UdpSource(_Socket):
     """Frames received as version-1 datagrams on a UDP socket.
 
     Parameters
@@ -325,23 +349,8 @@ class UdpSource:
             self.n_received += 1
             yield Frame(index, ts, self._values, arrival)
 
-    def close(self) -> None:
-        """Close the socket."""
-        self.sock.close()
 
-    def __enter__(self) -> UdpSource:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
-
-
-class UdpSender:
+class UdpSender(_Socket):
     """Sends frames as version-1 datagrams (tests, docs, and a sensor bridge's model).
 
     Parameters
@@ -367,18 +376,3 @@ class UdpSender:
             self.send(i, ts, arr[i])
             if pace_s:
                 time.sleep(pace_s)
-
-    def close(self) -> None:
-        """Close the socket."""
-        self.sock.close()
-
-    def __enter__(self) -> UdpSender:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()

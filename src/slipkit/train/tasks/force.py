@@ -125,6 +125,20 @@ def _join(
     return merged
 
 
+def _target_rows(
+    dataset: Dataset, table: pd.DataFrame, target: str, axes: Any
+) -> tuple[pd.DataFrame, list[str]]:
+    """The input ``table``'s rows joined with the target stream's ``axes`` on (trial_id, t).
+
+    Returns the merged frame (``_row``: the input row of each target frame) and the axes.
+    """
+    key = pd.DataFrame(
+        {"trial_id": table["trial_id"], "t": table["t"], "_row": np.arange(len(table))}
+    )
+    names = _channels(dataset, _stream_name(dataset, target), axes)
+    return _join(key, _stream(dataset, target), names, target), names
+
+
 def _accepts_validation(model: Any) -> bool:
     try:
         return "validation_data" in inspect.signature(model.fit).parameters
@@ -309,15 +323,7 @@ class ForceRegression(Task):
         X = table[channels].to_numpy(dtype=np.float64)
         if self.baseline == "first":
             X = X - _first_frames_median(table, channels, int(self.baseline_frames))
-        key = pd.DataFrame(
-            {
-                "trial_id": table["trial_id"],
-                "t": table["t"],
-                "_row": np.arange(len(table)),
-            }
-        )
-        axes = _channels(dataset, _stream_name(dataset, self.target), self.axes)
-        merged = _join(key, _stream(dataset, self.target), axes, self.target)
+        merged, axes = _target_rows(dataset, table, self.target, self.axes)
         row = merged["_row"].to_numpy()
         X = X[row]
         if self.pdc_stream is not None:
@@ -690,15 +696,7 @@ class FingerDirection(Task):
         """(X, y) of every sample; ``y`` normalised to unit length."""
         table = _stream(dataset, self.stream)
         channels = _channels(dataset, self.stream, None)
-        key = pd.DataFrame(
-            {
-                "trial_id": table["trial_id"],
-                "t": table["t"],
-                "_row": np.arange(len(table)),
-            }
-        )
-        axes = _channels(dataset, _stream_name(dataset, self.target), self.axes)
-        merged = _join(key, _stream(dataset, self.target), axes, self.target)
+        merged, axes = _target_rows(dataset, table, self.target, self.axes)
         row = merged["_row"].to_numpy()
         y = merged[axes].to_numpy(dtype=np.float64)
         norm = np.linalg.norm(y, axis=1)
