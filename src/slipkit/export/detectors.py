@@ -6,9 +6,9 @@ returns ``score`` ``(batch,)`` float32: the detector's
 :meth:`~slipkit.baselines.base.StreamDetector.decision_function` at the window's
 last sample. The decision is slip where ``score >= threshold_`` (non-strict, as
 every :class:`~slipkit.baselines.base.StreamDetector`); :class:`DetectorGraph`
-carries that as ``strict=False`` in :meth:`DetectorGraph.decision` because the
-registry's :class:`~slipkit.export.registry.ExportedGraph` writes ``strict: True``
-(scikit-learn's ``predict``). Inside, every graph casts the window to float64, so
+defaults ``strict`` to False, where the registry's
+:class:`~slipkit.export.registry.ExportedGraph` defaults to True (scikit-learn's
+``predict``). Inside, every graph casts the window to float64, so
 the only rounding that differs from the batch detector is the float32 input.
 
 * :class:`~slipkit.baselines.fsr.FSRTouchSlip` -- ``W = 2 block`` (10): the two
@@ -115,21 +115,14 @@ class DetectorGraph(ExportedGraph):
         0-based sample of the recording at which the batch detector first decides
         (its warm-up ends); earlier calls have no batch counterpart.
     strict : bool
-        Decision rule: ``score > threshold`` when True, ``score >= threshold``
-        (every StreamDetector) when False.
+        As in :class:`~slipkit.export.registry.ExportedGraph`; False here
+        (``score >= threshold``, every StreamDetector).
     """
 
     window: int = 1
     hop: int = 1
     first_decision: int = 0
     strict: bool = False
-
-    def decision(self) -> dict[str, Any] | None:
-        """The registry's rule with ``strict`` set from this graph (False: ``>=``)."""
-        out = super().decision()
-        if out is not None and "strict" in out:
-            out["strict"] = self.strict
-        return out
 
     def describe(self) -> dict[str, Any]:
         """The registry's description plus ``frame`` (window, hop, first_decision)."""

@@ -88,6 +88,9 @@ class ExportedGraph:
         Versions of the libraries that built the graph.
     input_dtype : str
         Always ``"float32"``.
+    strict : bool
+        The threshold rule's comparison: ``score > threshold`` (True, scikit-learn's
+        ``predict``) or ``score >= threshold`` (False, the analytic detectors).
     """
 
     model: onnx.ModelProto
@@ -105,6 +108,7 @@ class ExportedGraph:
     features: dict[str, Any] | None = None
     producers: dict[str, str] = field(default_factory=dict)
     input_dtype: str = "float32"
+    strict: bool = True
 
     def serialize(self) -> bytes:
         """The ONNX file's bytes."""
@@ -128,7 +132,7 @@ class ExportedGraph:
                 "column": 0,
                 "classes": list(self.classes),
                 "threshold": self.threshold,
-                "strict": True,
+                "strict": self.strict,
             }
         return {
             "output": self.score_output,
