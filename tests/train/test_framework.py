@@ -161,3 +161,34 @@ def test_sweeper_runs_one_folder_per_job(tmp_path: Path) -> None:
     assert all((r / "metrics.json").is_file() for r in runs)
     cs = {json.loads((r / "metrics.json").read_text())["params"]["C"] for r in runs}
     assert 2 == len(cs)
+
+
+def test_selection_record_lists_every_candidate_and_the_best() -> None:
+    """The selection record holds each candidate's mean / std and the best of them."""
+    from sklearn.linear_model import LogisticRegression
+
+    from slipkit.train.search import format_best, selection_record
+
+    X, y, g = _toy()
+    space = {"C": [1e-3, 1e2, "log"], "fit_intercept": {"choices": [True, False]}}
+    best, score, history = optuna_search(
+        LogisticRegression(), X, y, g, space=space, n_trials=4, cv=3, seed=1
+    )
+    rec = selection_record(best, score, history, cv=3, scoring="balanced_accuracy")
+    assert 4 == len(rec["candidates"])
+    top = max(rec["candidates"], key=lambda c: c["mean"])
+    assert (best, score) == (top["params"], top["mean"])
+    assert {"C", "fit_intercept"} == set(rec["best"])
+    assert "group-kfold by trial" in format_best(rec)
+
+
+def test_group_cv_scores_each_fold_on_unseen_groups() -> None:
+    """group_cv fits k clones, each scored on groups it never saw, and reports mean / std."""
+    from sklearn.dummy import DummyClassifier
+
+    from slipkit.train.search import group_cv
+
+    X, y, g = _toy()
+    val = group_cv(DummyClassifier(), X, y, g, cv=3, unit="object")
+    assert ("group-kfold by object", 3, 3) == (val["cv"], val["k"], len(val["folds"]))
+    assert [0.5, 0.5, 0.5] == val["folds"]  # a constant answer: balanced accuracy 0.5

@@ -126,8 +126,72 @@ def test_tactip_svm_run_writes_every_file(svm_run: Path) -> None:
     """experiment=tactip_svm writes the run files and the test predictions."""
     assert RUN_FILES | {"test_predictions.csv"} == {p.name for p in svm_run.iterdir()}
     info = json.loads((svm_run / "run.json").read_text())
-    assert "test.accuracy" == info["objective"]["name"]
-    assert metrics_of(svm_run)["test"]["accuracy"] == info["objective"]["value"]
+    assert "validation.balanced_accuracy" == info["objective"]["name"]
+    m = metrics_of(svm_run)
+    assert m["validation"]["balanced_accuracy"] == info["objective"]["value"]
+    assert m["selection"]["best_score"] == info["objective"]["value"]
+
+
+def test_tactip_svm_records_the_selection(svm_run: Path) -> None:
+    """The in-run search writes its method, CV, best parameters and every candidate."""
+    sel = metrics_of(svm_run)["selection"]
+    assert ("optuna-tpe", "group-kfold by trial", "balanced_accuracy") == (
+        sel["method"],
+        sel["cv"],
+        sel["scoring"],
+    )
+    assert 2 == len(sel["candidates"])
+    assert {"C", "gamma"} == set(sel["best"])
+    best = max(sel["candidates"], key=lambda c: c["mean"])
+    assert (best["params"], best["mean"]) == (sel["best"], sel["best_score"])
+
+
+def _corrupt_test_side(dataset: Dataset, test_ids: list[str]) -> Dataset:
+    """``dataset`` with the slip onsets of ``test_ids`` moved to 0.1 s (wrong labels)."""
+    trials = dataset.trials.copy()
+    trials.loc[trials["trial_id"].isin(test_ids), "slip_onset_s"] = 0.1
+    return Dataset(
+        sensor=dataset.sensor,
+        streams=dataset.streams,
+        trials=trials,
+        tables=dataset.tables,
+        labels=dataset.labels,
+        groups=dataset.groups,
+        provenance=dataset.provenance,
+        name=dataset.name,
+    )
+
+
+@pytest.mark.parametrize("search", [True, False])
+def test_test_labels_cannot_change_the_selection_or_the_objective(
+    tmp_path: Path, search: bool
+) -> None:
+    """Corrupting the test side's labels leaves the chosen model and the objective as they were."""
+    from slipkit.data.splits import split_by_trial
+
+    cfg = _compose("train", SMALL_SVM)
+    dataset = build_scene(cfg.scene).simulate(8, 0, progress=False)
+    search_cfg = {
+        "n_trials": 2,
+        "cv": 2,
+        "space": {"C": [1.0, 1e4, "log"], "gamma": [1e-5, 1e-1, "log"]},
+    }
+    task = tactip_module.TacTipFrames(search=search_cfg if search else None, cv=2)
+    test_ids = list(split_by_trial(dataset, test_size=0.5, seed=0).test)
+    corrupted = _corrupt_test_side(dataset, test_ids)
+    runs = []
+    for i, ds in enumerate((dataset, corrupted)):
+        (tmp_path / str(i)).mkdir()
+        result = task.fit(
+            TacTipSVM(C=686.6, gamma=6.6e-4), ds, seed=0, out=tmp_path / str(i)
+        )
+        runs.append(result)
+    clean, bad = (r.metrics for r in runs)
+    assert clean["test"]["accuracy"] != bad["test"]["accuracy"]  # the test side changed
+    assert clean.get("selection") == bad.get("selection")
+    assert clean["validation"] == bad["validation"]
+    assert clean["params"] == bad["params"]
+    assert task.objective_value(clean) == task.objective_value(bad)
 
 
 def test_tactip_svm_search_sees_only_the_training_half(
@@ -168,7 +232,7 @@ def test_table1_has_seven_rows_with_the_published_figures(table_run: Path) -> No
 
 
 def test_table1_saves_the_main_row_and_scores_its_objective(table_run: Path) -> None:
-    """model.joblib is the N=4 Gaussian (dr, dtheta) SVM; the objective is its test accuracy."""
+    """model.joblib is the N=4 Gaussian (dr, dtheta) SVM; the objective is its validation score."""
     metrics = metrics_of(table_run)
     main = next(r for r in metrics["rows"] if r["main"])
     model = joblib.load(table_run / "model.joblib")
@@ -177,7 +241,9 @@ def test_table1_saves_the_main_row_and_scores_its_objective(table_run: Path) -> 
     assert pytest.approx(main["params"]["C"]) == model.C
     assert main["test"] == metrics["test"]
     info = json.loads((table_run / "run.json").read_text())
-    assert main["test"]["accuracy"] == info["objective"]["value"]
+    assert "validation.balanced_accuracy" == info["objective"]["name"]
+    assert main["selection"]["best_score"] == info["objective"]["value"]
+    assert main["selection"] == metrics["selection"]
 
 
 def test_table1_curved_rows_name_the_objects(table_run: Path) -> None:
@@ -227,6 +293,9 @@ def test_table1_without_search_uses_the_paper_parameters(tmp_path: Path) -> None
                 r["params_source"],
                 r["params"]["C"],
             )
+    val = metrics_of(run)["validation"]  # 2 flat training runs: 2 folds, not 3
+    assert ("group-kfold by trial", 2) == (val["cv"], val["k"])
+    assert 2 == len(val["folds"])
 
 
 # -- evaluate and run folders ----------------------------------------------------

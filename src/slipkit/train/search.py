@@ -1,22 +1,114 @@
-"""Bayesian optimisation of an estimator's hyper-parameters inside one run (Optuna).
+"""Model selection inside one run: Optuna TPE search and group-aware validation.
 
 A TPE sampler with a fixed seed proposes values; each is scored by group-aware
-cross-validation (``GroupKFold``: frames of one trial never sit on both sides), so
-the search never looks at the test side. Optuna does the optimisation; this module
-only maps a small config (``{param: [low, high, "log"|"linear"]}``) to it.
+cross-validation (``GroupKFold``: frames of one trial, or grasps of one object, never
+sit on both sides), so the search never looks at the test side. Optuna does the
+optimisation; this module only maps a small config to it::
+
+    {param: [low, high]}            # uniform float
+    {param: [low, high, "log"]}     # log-uniform float
+    {param: [low, high, "int"]}     # integer
+    {param: {choices: [a, b, c]}}   # categorical
+
+Every search is recorded in the run as a *selection* record
+(:func:`selection_record`): the method, the CV, the scoring, the chosen parameters,
+their validation score and every candidate's mean and standard deviation over the
+folds. :func:`group_cv` scores one fixed estimator the same way, so a task without a
+search still reports a validation score for the Hydra sweeper to optimise.
 """
 
 from __future__ import annotations
 
 import logging
+import sys
+import time
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 from sklearn.base import clone
+from sklearn.metrics import get_scorer
 from sklearn.model_selection import GroupKFold, cross_val_score
 
 log = logging.getLogger("slipkit.search")
+
+#: ``method`` of the selection records written by :func:`optuna_search`.
+METHOD = "optuna-tpe"
+
+
+def _progress(label: str, done: int, total: int, start: float, extra: str = "") -> None:
+    """One line on stderr: what runs, i of n, elapsed and a linear ETA (s)."""
+    elapsed = time.perf_counter() - start
+    eta = elapsed / done * (total - done) if done else float("nan")
+    line = (
+        f"{label}: {done}/{total} done, {elapsed:.0f} s elapsed, ETA {eta:.0f} s{extra}"
+    )
+    print(line, file=sys.stderr, flush=True)
+    log.info(line)
+
+
+def _check_groups(groups: np.ndarray, cv: int, unit: str) -> None:
+    n_groups = len(np.unique(groups))
+    if n_groups < cv:
+        raise ValueError(
+            f"{cv}-fold group CV needs >= {cv} {unit}s on the training side; "
+            f"got {n_groups}"
+        )
+
+
+def group_cv(
+    estimator: Any,
+    X: np.ndarray,
+    y: np.ndarray,
+    groups: np.ndarray,
+    *,
+    cv: int = 3,
+    scoring: str = "balanced_accuracy",
+    unit: str = "trial",
+    label: str = "validation",
+) -> dict[str, Any]:
+    """Score a fixed ``estimator`` by ``GroupKFold`` over ``groups`` (training side only).
+
+    Returns ``{"cv": "group-kfold by <unit>", "k": cv, "scoring": scoring,
+    scoring: mean, "std": s, "folds": [...]}``: the record a task without a search
+    stores as ``metrics["validation"]``.
+    """
+    _check_groups(groups, cv, unit)
+    splitter = GroupKFold(n_splits=cv)
+    start = time.perf_counter()
+    scores = []
+    for i, (tr, te) in enumerate(splitter.split(X, y, groups)):
+        model = clone(estimator).fit(X[tr], y[tr])
+        scores.append(_score(model, X[te], y[te], scoring))
+        _progress(f"{label}: fold", i + 1, cv, start)
+    return {
+        "cv": f"group-kfold by {unit}",
+        "k": int(cv),
+        "scoring": scoring,
+        scoring: float(np.mean(scores)),
+        "std": float(np.std(scores)),
+        "folds": [float(s) for s in scores],
+    }
+
+
+def _score(model: Any, X: np.ndarray, y: np.ndarray, scoring: str) -> float:
+    return float(get_scorer(scoring)(model, X, y))
+
+
+def _suggest(trial: Any, name: str, spec: Any) -> Any:
+    if isinstance(spec, Mapping):
+        if "choices" not in spec:
+            raise ValueError(f"search space {name!r}: a mapping needs 'choices'")
+        return trial.suggest_categorical(name, list(spec["choices"]))
+    low, high = spec[0], spec[1]
+    kind = spec[2] if len(spec) > 2 else "linear"
+    if kind == "int":
+        return trial.suggest_int(name, int(low), int(high))
+    if kind not in ("log", "linear"):
+        raise ValueError(
+            f"search space {name!r}: scale {kind!r}; expected log, linear or int"
+        )
+    return trial.suggest_float(name, float(low), float(high), log=kind == "log")
 
 
 def optuna_search(
@@ -25,12 +117,14 @@ def optuna_search(
     y: np.ndarray,
     groups: np.ndarray,
     *,
-    space: Mapping[str, Sequence[Any]],
+    space: Mapping[str, Any],
     n_trials: int,
     cv: int = 3,
     scoring: str = "balanced_accuracy",
     seed: int = 0,
-) -> tuple[dict[str, float], float, list[dict[str, Any]]]:
+    unit: str = "trial",
+    label: str = "search",
+) -> tuple[dict[str, Any], float, list[dict[str, Any]]]:
     """Search ``space`` with Optuna TPE; return (best params, best CV score, history).
 
     Parameters
@@ -38,7 +132,8 @@ def optuna_search(
     estimator : scikit-learn estimator
         Cloned for every candidate; the search never fits it in place.
     space : mapping
-        ``{name: [low, high]}`` or ``[low, high, "log"]`` (log-uniform).
+        ``{name: [low, high]}``, ``[low, high, "log"]``, ``[low, high, "int"]`` or
+        ``{choices: [...]}`` (see the module docstring).
     n_trials : int
         Candidates evaluated (>= 1).
     cv : int
@@ -47,6 +142,20 @@ def optuna_search(
         A scikit-learn scorer name, maximised.
     seed : int
         Seed of the TPE sampler: the same inputs give the same search.
+    unit : str
+        What one group is (``trial``, ``object``): for messages and the record.
+    label : str
+        What is searched, shown in the progress lines on stderr.
+
+    Returns
+    -------
+    best : dict
+        The chosen parameters.
+    best_score : float
+        Their mean validation score over the folds.
+    history : list of dict
+        Per candidate: ``number``, ``value`` (mean), ``std``, ``folds`` and the
+        parameters (flat, for tables), in the order they were tried.
     """
     # optuna 2.10 imports alembic, which logs its plugin setup at INFO to our stdout log.
     logging.getLogger("alembic").setLevel(logging.WARNING)
@@ -54,32 +163,90 @@ def optuna_search(
 
     if n_trials < 1:
         raise ValueError(f"n_trials must be >= 1; got {n_trials}")
-    n_groups = len(np.unique(groups))
-    if n_groups < cv:
-        raise ValueError(
-            f"{cv}-fold group CV needs >= {cv} trials on the training side; got {n_groups}"
-        )
+    _check_groups(groups, cv, unit)
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     splitter = GroupKFold(n_splits=cv)
+    start = time.perf_counter()
 
     def objective(trial: Any) -> float:
-        params = {}
-        for name, spec in space.items():
-            low, high = float(spec[0]), float(spec[1])
-            log_scale = len(spec) > 2 and spec[2] == "log"
-            params[name] = trial.suggest_float(name, low, high, log=log_scale)
+        params = {name: _suggest(trial, name, spec) for name, spec in space.items()}
         model = clone(estimator).set_params(**params)
         scores = cross_val_score(
             model, X, y, groups=groups, cv=splitter, scoring=scoring
         )
-        return float(np.mean(scores))
+        trial.set_user_attr("std", float(np.std(scores)))
+        trial.set_user_attr("folds", [float(s) for s in scores])
+        mean = float(np.mean(scores))
+        _progress(
+            f"{label}: candidate",
+            trial.number + 1,
+            int(n_trials),
+            start,
+            f" ({cv} folds by {unit} each; this one {scoring} {mean:.4f})",
+        )
+        return mean
 
     study = optuna.create_study(
         direction="maximize", sampler=optuna.samplers.TPESampler(seed=seed)
     )
     study.optimize(objective, n_trials=int(n_trials))
-    history = [{"number": t.number, "value": t.value, **t.params} for t in study.trials]
+    history = [
+        {
+            "number": t.number,
+            "value": t.value,
+            "std": t.user_attrs.get("std"),
+            "folds": t.user_attrs.get("folds"),
+            **t.params,
+        }
+        for t in study.trials
+    ]
     log.info(
-        "optuna: best %s = %.4f at %s", scoring, study.best_value, study.best_params
+        "%s: best %s = %.4f at %s", label, scoring, study.best_value, study.best_params
     )
     return dict(study.best_params), float(study.best_value), history
+
+
+def selection_record(
+    best: Mapping[str, Any],
+    best_score: float,
+    history: Sequence[Mapping[str, Any]],
+    *,
+    cv: int,
+    scoring: str,
+    unit: str = "trial",
+    method: str = METHOD,
+) -> dict[str, Any]:
+    """The ``metrics["selection"]`` record of one search (see the module docstring)."""
+    skip = {"number", "value", "std", "folds"}
+    return {
+        "method": method,
+        "cv": f"group-kfold by {unit}",
+        "k": int(cv),
+        "scoring": scoring,
+        "best": dict(best),
+        "best_score": float(best_score),
+        "candidates": [
+            {
+                "params": {k: v for k, v in h.items() if k not in skip},
+                "mean": h["value"],
+                "std": h.get("std"),
+            }
+            for h in history
+        ],
+    }
+
+
+def format_best(record: Mapping[str, Any]) -> str:
+    """One line: the chosen parameters and their validation score."""
+    params = ", ".join(
+        f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
+        for k, v in record["best"].items()
+    )
+    return (
+        f"selected on validation ({record['cv']}, k={record['k']}, "
+        f"{record['scoring']} {record['best_score']:.4f} over "
+        f"{len(record['candidates'])} candidates): {params}"
+    )
+
+
+__all__ = ["METHOD", "format_best", "group_cv", "optuna_search", "selection_record"]

@@ -23,7 +23,12 @@ from slipkit.evaluate.metrics import classification_metrics, delay_summary
 from slipkit.features.pins import SLIP, STATIC, Variant
 from slipkit.features.tactip import DatasetFeatures, dataset_features
 from slipkit.models.online import detection_delay, first_detection
-from slipkit.train.search import optuna_search
+from slipkit.train.search import (
+    format_best,
+    group_cv,
+    optuna_search,
+    selection_record,
+)
 from slipkit.train.task import Task, TaskResult
 
 log = logging.getLogger("slipkit.tactip")
@@ -46,11 +51,17 @@ class TacTipFrames(Task):
     search : mapping or None
         In-run Bayesian optimisation: ``{n_trials, cv, scoring, space: {C: [lo, hi,
         "log"], gamma: [...]}}``; None or ``n_trials: 0`` keeps the model's parameters.
+    cv : int
+        Folds of the group CV (by trial, training side only) that gives the run's
+        validation score when there is no search (with a search: ``search.cv``).
+    scoring : str
+        Scikit-learn scorer of that validation (with a search: ``search.scoring``);
+        the run's objective is ``validation.<scoring>``.
     stream, label : str
         Pins stream and onset label names.
     """
 
-    objective = "test.accuracy"
+    objective = "validation.balanced_accuracy"
     direction = "maximize"
 
     def __init__(
@@ -61,6 +72,8 @@ class TacTipFrames(Task):
         test_size: float = 0.5,
         debounce_k: int = 2,
         search: Mapping[str, Any] | None = None,
+        cv: int = 3,
+        scoring: str = "balanced_accuracy",
         stream: str = "pins",
         label: str = "slip_onset_s",
     ) -> None:
@@ -69,8 +82,12 @@ class TacTipFrames(Task):
         self.test_size = test_size
         self.debounce_k = debounce_k
         self.search = search
+        self.cv = cv
+        self.scoring = scoring
         self.stream = stream
         self.label = label
+        # The sweeper optimises a validation score of the training side, never test.
+        self.objective = f"validation.{self._selection_scoring()}"
 
     # -- data -----------------------------------------------------------------
     def features(self, dataset: Dataset) -> DatasetFeatures:
@@ -90,13 +107,30 @@ class TacTipFrames(Task):
         return float(spec.rate_hz)
 
     # -- fit / score ------------------------------------------------------------
+    def _searching(self) -> bool:
+        return int((self.search or {}).get("n_trials", 0)) > 0
+
+    def _selection_scoring(self) -> str:
+        if self._searching():
+            return str((self.search or {}).get("scoring", "balanced_accuracy"))
+        return str(self.scoring)
+
     def fit_model(
-        self, model: Any, feats: DatasetFeatures, *, seed: int
+        self, model: Any, feats: DatasetFeatures, *, seed: int, validate: bool = True
     ) -> tuple[Any, dict[str, Any]]:
-        """Fit ``model`` on ``feats`` (after the optional Optuna search)."""
+        """Fit ``model`` on ``feats`` (the training side) after model selection.
+
+        With a search, Optuna picks the parameters by group CV by trial
+        (``info["selection"]``, ``info["search"]``); without one and with
+        ``validate``, the model's own parameters are scored by the same group CV.
+        Either way ``info["validation"]`` holds the validation score of the fitted
+        parameters. ``feats`` must not contain test frames.
+        """
         info: dict[str, Any] = {}
         search = dict(self.search or {})
-        if int(search.get("n_trials", 0)) > 0:
+        scoring = self._selection_scoring()
+        if self._searching():
+            cv = int(search.get("cv", 3))
             best, score, history = optuna_search(
                 model,
                 feats.X,
@@ -104,17 +138,46 @@ class TacTipFrames(Task):
                 feats.groups,
                 space=search["space"],
                 n_trials=int(search["n_trials"]),
-                cv=int(search.get("cv", 3)),
-                scoring=str(search.get("scoring", "balanced_accuracy")),
+                cv=cv,
+                scoring=scoring,
                 seed=seed,
+                label=f"TacTip SVM ({getattr(model, 'kernel', '?')}) search",
             )
             model.set_params(**best)
             info["search"] = {
                 "best_params": best,
                 "best_cv_score": score,
-                "scoring": str(search.get("scoring", "balanced_accuracy")),
+                "scoring": scoring,
                 "history": history,
             }
+            info["selection"] = selection_record(
+                best, score, history, cv=cv, scoring=scoring
+            )
+            best_row = max(history, key=lambda h: h["value"])
+            info["validation"] = {
+                "cv": "group-kfold by trial",
+                "k": cv,
+                "scoring": scoring,
+                scoring: score,
+                "std": best_row.get("std"),
+                "folds": best_row.get("folds"),
+                "source": "selection (best candidate)",
+            }
+            log.info("%s", format_best(info["selection"]))
+        elif validate:
+            # Fewer training trials than folds: one trial per fold (leave-one-out).
+            k = min(int(self.cv), len(np.unique(feats.groups)))
+            if k < int(self.cv):
+                log.warning("validation: %d training trials, %d folds", k, k)
+            info["validation"] = group_cv(
+                model,
+                feats.X,
+                feats.y,
+                feats.groups,
+                cv=k,
+                scoring=scoring,
+                label="TacTip SVM validation",
+            )
         model.fit(feats.X, feats.y)
         info["params"] = _svm_params(model)
         return model, info
@@ -202,15 +265,21 @@ def _summary(metrics: Mapping[str, Any]) -> list[str]:
     ks = (
         f", KS {p['kernel_scale']:.4g} (gamma {p['gamma']:.3g})" if "gamma" in p else ""
     )
-    return [
+    val = metrics["validation"]
+    lines = [
         f"TacTip {p['kernel']} SVM on {metrics['variant']} (N={metrics['n_slip']}): "
         f"C {p['C']:.4g}{ks}",
+        f"  validation ({val['cv']}, k={val['k']}, training side only): "
+        f"{val['scoring']} {val[val['scoring']]:.4f}",
         f"  test frames {test['accuracy'] * 100:.2f} % correct "
         f"(majority {metrics['majority_baseline_test'] * 100:.2f} %), balanced "
         f"{test['balanced_accuracy']:.3f}",
         f"  online ({det['debounce_k']} frames): {det['detected']}/{det['n_trials']} slips "
         f"detected, median delay {det['median_frames']} frames = {det['median_ms']:.1f} ms",
     ]
+    if "selection" in metrics:
+        lines.insert(1, "  " + format_best(metrics["selection"]))
+    return lines
 
 
 __all__: Sequence[str] = ["TacTipFrames"]

@@ -44,6 +44,7 @@ from slipkit.data.splits import split_by_trial
 from slipkit.errors import SlipkitError
 from slipkit.features.pins import SLIP, STATIC, Variant
 from slipkit.features.tactip import DatasetFeatures
+from slipkit.train.search import format_best
 from slipkit.train.task import TaskResult
 from slipkit.train.tasks.tactip import TacTipFrames
 
@@ -147,6 +148,10 @@ class TacTipTable1(TacTipFrames):
         {C: [...]}}`` (or one flat space, gamma dropped for linear rows). None or
         ``n_trials: 0``: Gaussian rows use the paper's KS / BC, linear rows
         C = :data:`LINEAR_DEFAULT_C`.
+    cv, scoring : int, str
+        Without a search, the main row's parameters are scored by ``cv``-fold group
+        CV by trial on the training half (``metrics["validation"]``, the run's
+        objective ``validation.<scoring>``); the test half is scored once, after.
     standardize_linear : bool
         Fit the linear rows on z-scored features (``standardize=True``). A linear SVM
         draws the same family of boundaries either way (scaling only reweights the
@@ -172,6 +177,8 @@ class TacTipTable1(TacTipFrames):
         test_size: float = 0.5,
         debounce_k: int = 2,
         search: Mapping[str, Any] | None = None,
+        cv: int = 3,
+        scoring: str = "balanced_accuracy",
         standardize_linear: bool = True,
         plot_runs: int = 3,
         stream: str = "pins",
@@ -185,6 +192,8 @@ class TacTipTable1(TacTipFrames):
             test_size=test_size,
             debounce_k=debounce_k,
             search=search,
+            cv=cv,
+            scoring=scoring,
             stream=stream,
             label=label,
         )
@@ -221,8 +230,9 @@ class TacTipTable1(TacTipFrames):
             chosen = [str(o) for o in self.objects]
             table = self._by_object(dataset, chosen)
         # Two halves; with the search, as many training runs as its group-CV folds.
-        per_side = int((self.search or {}).get("cv", 3)) if self._searching() else 1
-        need = 2 * max(per_side, 1)
+        # Without it, at least 2 training runs for the validation's group CV.
+        per_side = int((self.search or {}).get("cv", 3)) if self._searching() else 2
+        need = 2 * max(per_side, 2)
         if len(table) < need:
             counts = objs.value_counts().to_dict()
             raise SlipkitError(
@@ -251,6 +261,8 @@ class TacTipTable1(TacTipFrames):
             test_size=self.test_size,
             debounce_k=self.debounce_k,
             search=self._row_search(row),
+            cv=self.cv,
+            scoring=self.scoring,
             stream=self.stream,
             label=self.label,
         )
@@ -319,7 +331,8 @@ class TacTipTable1(TacTipFrames):
             frames = self.row_task(row)
             est, source = self.row_estimator(model, row)
             f_train, f_test = frames.features(train), frames.features(test)
-            est, info = frames.fit_model(est, f_train, seed=seed)
+            # Validation (the run's objective) only for the saved, main row.
+            est, info = frames.fit_model(est, f_train, seed=seed, validate=row.main)
             m_train, _ = frames.score(est, train, f_train)
             m_test, _ = frames.score(est, test, f_test)
             entry = _row_entry(row, frames, source, info, m_train, m_test, f_test)
@@ -337,6 +350,8 @@ class TacTipTable1(TacTipFrames):
                 time.perf_counter() - start,
             )
             fitted[row.name] = (est, f_test)
+            if row.main:
+                main_info: dict[str, Any] = info
         main = next(r for r in rows if r["main"])
         main_model, main_feats = fitted[main["name"]]
 
@@ -355,6 +370,12 @@ class TacTipTable1(TacTipFrames):
             "split": {"train": list(split.train), "test": list(split.test)},
             "main_row": main["name"],
             "params": main["params"],
+            "validation": main_info["validation"],
+            **(
+                {"selection": main_info["selection"]}
+                if "selection" in main_info
+                else {}
+            ),
             "test": main["test"],
             "majority_baseline_test": main["majority_baseline_test"],
             "rows": rows,
@@ -467,6 +488,7 @@ def _row_entry(
     }
     if "search" in info:
         entry["search"] = info["search"]
+        entry["selection"] = info["selection"]
     return entry
 
 
@@ -666,6 +688,13 @@ def _summary(metrics: Mapping[str, Any]) -> list[str]:
         )
     sources = sorted({r["params_source"] for r in metrics["rows"]})
     lines.append(f"  C / KS from: {', '.join(sources)}; KS = 1/sqrt(gamma)")
+    val = metrics["validation"]
+    lines.append(
+        f"  {metrics['main_row']} validation ({val['cv']}, k={val['k']}, training "
+        f"half only): {val['scoring']} {val[val['scoring']]:.4f}"
+    )
+    if "selection" in metrics:
+        lines.append("  " + format_best(metrics["selection"]))
     lines.append(f"  {ACCURACY_NOTE}")
     lines.append(
         "  online: 'detected' counts runs where the 2-frame rule fired; 'early' of "
