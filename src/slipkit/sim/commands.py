@@ -9,6 +9,7 @@ from hydra.errors import InstantiationException
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
+from slipkit._files import check_out_path
 from slipkit.data.io import save_dataset
 from slipkit.data.summary import summarize
 from slipkit.errors import SlipkitError
@@ -32,17 +33,21 @@ def build_scene(scene_cfg: DictConfig) -> Scene:
         if isinstance(exc.__cause__, SlipkitError):
             raise exc.__cause__ from None
         raise
-    return Scene(name=str(scene_cfg.name), model=model, effects=effects)
+    order = scene_cfg.get("order")
+    if order is not None:
+        order = [str(k) for k in order]
+    return Scene(name=str(scene_cfg.name), model=model, effects=effects, order=order)
 
 
 def simulate_main(cfg: DictConfig) -> Path:
     """Simulate ``cfg.n_trials`` trials of ``cfg.scene`` and write the dataset to ``cfg.out``."""
+    out = check_out_path(str(cfg.out), kind="dataset", overwrite=bool(cfg.overwrite))
     scene = build_scene(cfg.scene)
     config = OmegaConf.to_container(cfg.scene, resolve=True)
     dataset = scene.simulate(
         int(cfg.n_trials), int(cfg.seed), progress=bool(cfg.progress), config=config
     )
-    out = save_dataset(dataset, Path(str(cfg.out)), overwrite=bool(cfg.overwrite))
+    out = save_dataset(dataset, out, overwrite=bool(cfg.overwrite))
     if cfg.summary:
         print(summarize(dataset))
     print(out)

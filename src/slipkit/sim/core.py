@@ -10,14 +10,24 @@ parameters; the simulator evaluates exactly those and nothing else.
 Determinism: trial ``i`` of a run with seed ``s`` draws from
 ``numpy.random.default_rng([s, i])``, so a trial does not depend on how many trials
 were asked for, and the same seed gives byte-identical dataset files.
+
+Randomised effect parameters: an effect registers which of its parameters may be drawn
+per trial and how (``register_effect(name, draws={"sigma": "log"})``: ``uniform``,
+``log`` for log-uniform, ``choice`` for one of a list). A scene config then gives such a
+parameter either as a scalar (fixed, no draw) or as ``[lo, hi]`` (a list of options for
+``choice``), and :func:`draw_effect_params` draws it from the trial's generator just
+before the effect runs. The drawn values join the trial's metadata as
+``<effect key>.<parameter>`` columns. Parameters an effect does not declare pass through
+unchanged, so effects that take ``[lo, hi]`` per event (``fsr_disturbance``) or a pair
+(``quantisation.full_scale``) keep their meaning.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Literal, Protocol
 
 import numpy as np
 import pandas as pd
@@ -82,10 +92,32 @@ class SceneState:
 
 Effect = Callable[..., SceneState]
 EFFECTS: dict[str, Effect] = {}
+Draw = Literal["uniform", "log", "choice"]
+#: effect name -> {parameter: how a ``[lo, hi]`` (or list) value is drawn per trial}
+EFFECT_DRAWS: dict[str, dict[str, Draw]] = {}
+_DRAW_KINDS = ("uniform", "log", "choice")
 
 
-def register_effect(name: str) -> Callable[[Effect], Effect]:
-    """Decorator: register an effect under ``name`` (refuses duplicates)."""
+def register_effect(
+    name: str, *, draws: Mapping[str, Draw] | None = None
+) -> Callable[[Effect], Effect]:
+    """Decorator: register an effect under ``name`` (refuses duplicates).
+
+    Parameters
+    ----------
+    name : str
+        Registry name, the key a scene config lists.
+    draws : mapping of str to {"uniform", "log", "choice"}, optional
+        Parameters that a scene may give as ``[lo, hi]`` (or, for ``choice``, a list of
+        options) to draw them once per trial: uniform, log-uniform (``lo > 0``) or one
+        option with equal probability (see :func:`draw_effect_params`).
+    """
+    spec = dict(draws or {})
+    bad = {p: k for p, k in spec.items() if k not in _DRAW_KINDS}
+    if bad:
+        raise ValueError(
+            f"effect {name!r}: unknown draw kinds {bad}; use {_DRAW_KINDS}"
+        )
 
     def deco(fn: Effect) -> Effect:
         if name in EFFECTS and EFFECTS[name] is not fn:
@@ -93,9 +125,82 @@ def register_effect(name: str) -> Callable[[Effect], Effect]:
                 f"effect {name!r} is already registered by {EFFECTS[name].__module__}"
             )
         EFFECTS[name] = fn
+        EFFECT_DRAWS[name] = spec
         return fn
 
     return deco
+
+
+def _is_list(value: Any) -> bool:
+    return isinstance(value, Sequence) and not isinstance(value, str | bytes)
+
+
+def draw_effect_params(
+    key: str, params: Mapping[str, Any] | None, rng: np.random.Generator
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """An effect's keyword arguments for one trial, with declared ranges drawn.
+
+    For each parameter the effect declared drawable (in declaration order, so the
+    draws do not depend on the order of the config's keys): a scalar stays fixed and
+    consumes no random numbers; ``[lo, hi]`` with ``lo < hi`` is drawn uniformly
+    (``uniform``) or log-uniformly (``log``: ``exp(U(log lo, log hi))``); ``[v, v]``
+    is ``v``; for ``choice`` a list gives one of its entries, each equally likely.
+
+    Parameters
+    ----------
+    key : str
+        The scene's effect key (``white_noise@pac``); names the field on error.
+    params : mapping or None
+        The configured parameters.
+    rng : numpy.random.Generator
+        The trial's generator.
+
+    Returns
+    -------
+    kwargs : dict
+        Parameters to call the effect with.
+    drawn : dict
+        ``{"<key>.<parameter>": value}`` for each parameter drawn from a range.
+    """
+    kwargs = dict(params or {})
+    drawn: dict[str, Any] = {}
+    for param, kind in EFFECT_DRAWS.get(effect_name(key), {}).items():
+        if param not in kwargs or not _is_list(kwargs[param]):
+            continue
+        where = f"scene.effects.{key}.{param}"
+        options = list(kwargs[param])
+        if kind == "choice":
+            if not options:
+                raise SimulationError(f"{where}: list at least one option")
+            value = (
+                options[0]
+                if len(options) == 1
+                else options[int(rng.integers(len(options)))]
+            )
+        else:
+            try:
+                lo, hi = (float(v) for v in options)
+            except (TypeError, ValueError):
+                raise SimulationError(
+                    f"{where}: expected a number or [lo, hi]; got {options!r}"
+                ) from None
+            if not (np.isfinite(lo) and np.isfinite(hi)) or hi < lo:
+                raise SimulationError(
+                    f"{where}: expected finite lo <= hi; got {options!r}"
+                )
+            if kind == "log" and lo <= 0:
+                raise SimulationError(
+                    f"{where}: a log-uniform range needs lo > 0; got {options!r}"
+                )
+            if lo == hi:
+                value = lo
+            elif kind == "log":
+                value = float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
+            else:
+                value = float(rng.uniform(lo, hi))
+        kwargs[param] = value
+        drawn[f"{key}.{param}"] = value
+    return kwargs, drawn
 
 
 class SceneModel(Protocol):
@@ -146,11 +251,18 @@ class Scene:
         Effect name -> keyword parameters, evaluated in this order. ``null`` parameters
         mean "no parameters". An effect absent here is never called. To apply one
         effect twice (e.g. noise on two streams), suffix the key: ``white_noise@pac``.
+        A parameter the effect declares drawable may be ``[lo, hi]``: drawn per trial
+        (:func:`draw_effect_params`) and recorded in the trial's metadata.
+    order : sequence of str, optional
+        Evaluation order, a permutation of the keys of ``effects``; default: their
+        mapping order. A variant that composes a base scene (Hydra defaults) can only
+        append effects to the base mapping, so it states the order here.
     """
 
     name: str
     model: SceneModel
     effects: Mapping[str, Mapping[str, Any] | None] = field(default_factory=dict)
+    order: Sequence[str] | None = None
 
     def __post_init__(self) -> None:
         _load_effect_modules()
@@ -159,20 +271,42 @@ class Scene:
             raise SimulationError(
                 f"scene {self.name!r}: unknown effects {unknown} (scene.effects); known: {sorted(EFFECTS)}"
             )
+        if self.order is not None:
+            order = [str(k) for k in self.order]
+            if sorted(order) != sorted(self.effects) or len(set(order)) != len(order):
+                raise SimulationError(
+                    f"scene {self.name!r}: scene.order must list each key of scene.effects "
+                    f"once; missing {sorted(set(self.effects) - set(order))}, "
+                    f"unknown or repeated {sorted(k for k in order if k not in self.effects or order.count(k) > 1)}"
+                )
+            self.order = tuple(order)
+
+    def effect_keys(self) -> tuple[str, ...]:
+        """The effect keys in evaluation order."""
+        return tuple(self.order) if self.order is not None else tuple(self.effects)
 
     def run_trial(self, index: int, seed: int) -> Trial:
-        """Simulate trial ``index`` of a run seeded with ``seed``."""
+        """Simulate trial ``index`` of a run seeded with ``seed``.
+
+        Per-trial draws of effect parameters are added to the trial's metadata under
+        ``<effect key>.<parameter>`` (and to ``truth["drawn"]`` for the effects).
+        """
         rng = np.random.default_rng([int(seed), int(index)])
         params = self.model.sample(rng)
         state = self.model.base(params, rng)
-        for name, kwargs in self.effects.items():
-            state = EFFECTS[effect_name(name)](state, rng, **dict(kwargs or {}))
+        drawn: dict[str, Any] = {}
+        for name in self.effect_keys():
+            kwargs, new = draw_effect_params(name, self.effects[name], rng)
+            if new:
+                drawn.update(new)
+                state = state.with_truth(drawn=dict(drawn))
+            state = EFFECTS[effect_name(name)](state, rng, **kwargs)
         streams, labels, meta = self.model.render(state)
         return Trial(
             trial_id=f"{self.name}-{index:05d}",
             streams=streams,
             labels=labels,
-            meta=meta,
+            meta={**meta, **drawn},
         )
 
     def simulate(
@@ -198,7 +332,7 @@ class Scene:
             "scene": self.name,
             "seed": int(seed),
             "n_trials": int(n_trials),
-            "effects": list(self.effects),
+            "effects": list(self.effect_keys()),
         }
         if config is not None:
             provenance["config"] = config

@@ -95,7 +95,7 @@ def contact_locality(
     return state.with_signal(target, base + (x - base) * gain)
 
 
-@register_effect("electrode_coupling")
+@register_effect("electrode_coupling", draws={"strength": "uniform"})
 def electrode_coupling(
     state: SceneState,
     rng: np.random.Generator,
@@ -249,7 +249,9 @@ def _rate(t: np.ndarray, effect: str, target: str) -> float:
     return float((len(t) - 1) / (t[-1] - t[0]))
 
 
-@register_effect("motor_vibration")
+@register_effect(
+    "motor_vibration", draws={"freq_hz": "uniform", "rms_counts": "uniform"}
+)
 def motor_vibration(
     state: SceneState,
     rng: np.random.Generator,
@@ -283,7 +285,7 @@ def motor_vibration(
     return state.with_signal(target, x + _along(tone, x))
 
 
-@register_effect("slip_vibration")
+@register_effect("slip_vibration", draws={"rms_counts": "uniform"})
 def slip_vibration(
     state: SceneState,
     rng: np.random.Generator,

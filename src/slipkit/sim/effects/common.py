@@ -12,7 +12,7 @@ import numpy as np
 from slipkit.sim.core import SceneState, SimulationError, register_effect
 
 
-@register_effect("white_noise")
+@register_effect("white_noise", draws={"sigma": "log"})
 def white_noise(
     state: SceneState, rng: np.random.Generator, *, target: str, sigma: float
 ) -> SceneState:
@@ -44,7 +44,7 @@ def quantisation(
     )
 
 
-@register_effect("drift")
+@register_effect("drift", draws={"rate_per_s": "uniform"})
 def drift(
     state: SceneState, rng: np.random.Generator, *, target: str, rate_per_s: float
 ) -> SceneState:
@@ -60,7 +60,7 @@ def drift(
     return state.with_signal(target, x + ramp)
 
 
-@register_effect("dropped_frames")
+@register_effect("dropped_frames", draws={"probability": "uniform"})
 def dropped_frames(
     state: SceneState, rng: np.random.Generator, *, stream: str, probability: float
 ) -> SceneState:
@@ -73,10 +73,29 @@ def dropped_frames(
     )
 
 
-@register_effect("timestamp_jitter")
+@register_effect("timestamp_jitter", draws={"sigma_s": "log"})
 def timestamp_jitter(
     state: SceneState, rng: np.random.Generator, *, stream: str, sigma_s: float
 ) -> SceneState:
     """Jitter the timestamps of ``stream`` by Gaussian noise (s); order is kept by sorting."""
     t = state.time[stream]
     return state.with_time(stream, np.sort(t + rng.normal(0.0, sigma_s, size=t.shape)))
+
+
+@register_effect("channel_offset", draws={"sigma": "uniform"})
+def channel_offset(
+    state: SceneState, rng: np.random.Generator, *, target: str, sigma: float
+) -> SceneState:
+    """A per-trial baseline offset per channel: ``x_c + o_c``, ``o_c ~ N(0, sigma^2)``.
+
+    Each channel keeps its offset for the whole trial (a re-seated sensor, another
+    unit, a temperature shift since the last tare); ``sigma`` in signal units.
+    Assumption: offsets are independent across channels and trials.
+    """
+    if not (np.isfinite(sigma) and sigma >= 0):
+        raise SimulationError(
+            f"effect 'channel_offset': sigma must be >= 0; got {sigma!r}"
+        )
+    x = state.signal(target, "channel_offset")
+    offsets = rng.normal(0.0, sigma, size=x.shape[1:])
+    return state.with_signal(target, x + offsets)

@@ -109,7 +109,7 @@ def contact_events(
     )
 
 
-@register_effect("vibration_incidents")
+@register_effect("vibration_incidents", draws={"rate_hz": "uniform"})
 def vibration_incidents(
     state: SceneState,
     rng: np.random.Generator,
@@ -198,7 +198,7 @@ def vibration_incidents(
     return out.with_truth(vibration_starts_s=starts)
 
 
-@register_effect("background_events")
+@register_effect("background_events", draws={"rate_hz": "log"})
 def background_events(
     state: SceneState, rng: np.random.Generator, *, rate_hz: float = 2000.0
 ) -> SceneState:

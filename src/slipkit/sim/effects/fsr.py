@@ -1,4 +1,5 @@
-"""FSR effects: the touch (press), stick-slip vibration events and impulsive disturbances.
+"""FSR effects: the touch (press), stick-slip vibration events, gentle and sharp
+impulsive disturbances, and the read-out's polarity.
 
 Each acts on the physical normal force ``signals["force"]`` (N, aligned with the
 ``truth`` stream) and carries the change to the conditioned voltage ``signals["fsr"]``
@@ -69,13 +70,15 @@ def _with_force(state: SceneState, force: np.ndarray, effect: str) -> SceneState
         delta[changed] = voltage_from_force(
             force[changed], coeffs, out_range
         ) - voltage_from_force(old[changed], coeffs, out_range)
+    if state.truth.get("polarity") == "rising":
+        delta = -delta  # fsr_polarity mirrored the voltage: changes mirror too
     t_fsr, t_truth = state.time["fsr"], state.time["truth_contact"]
     if t_fsr is not t_truth and not np.array_equal(t_fsr, t_truth):
         delta = np.interp(t_fsr, t_truth, delta)  # the fsr stream lost or moved frames
     return state.with_signal("force", force).with_signal("fsr", volts + delta)
 
 
-@register_effect("fsr_touch")
+@register_effect("fsr_touch", draws={"rise_s": "uniform"})
 def fsr_touch(
     state: SceneState, rng: np.random.Generator, *, rise_s: float = 0.01
 ) -> SceneState:
@@ -100,7 +103,10 @@ def fsr_touch(
     return _with_force(state, state.signal("force", name) * profile, name)
 
 
-@register_effect("fsr_slip_events")
+@register_effect(
+    "fsr_slip_events",
+    draws={"decay_s": "uniform", "ring_hz": "uniform", "jitter": "uniform"},
+)
 def fsr_slip_events(
     state: SceneState,
     rng: np.random.Generator,
@@ -218,5 +224,106 @@ def fsr_disturbance(
         i0, i1 = np.searchsorted(t, [start, start + length])
         phase = (t[i0:i1] - start) / length
         force[i0:i1] += a * 0.5 * (1.0 - np.cos(2.0 * np.pi * phase))
+        marks[i0:i1] = 1.0
+    return _with_force(state, force, name).with_signal("disturbance", marks)
+
+
+POLARITIES = ("falling", "rising")
+
+
+@register_effect("fsr_polarity", draws={"polarity": "choice"})
+def fsr_polarity(
+    state: SceneState, rng: np.random.Generator, *, polarity: str = "falling"
+) -> SceneState:
+    """The conditioning circuit's polarity: ``falling`` (the paper's: the voltage falls
+    as the force rises) or ``rising`` (the common voltage divider, ``V = Vcc R_m /
+    (R_m + R_FSR)``, whose output rises with force).
+
+    ``rising`` mirrors the voltage inside the output range, ``V <- lo + hi - V``
+    (``truth["output_range_V"]``): the same calibration read backwards, so rest sits
+    at ``lo + hi - V_rest`` (0.5 V for the default 4.5 V rest in 0-5 V) and every
+    force change moves the voltage the other way. Force-domain effects listed after
+    this one follow the mirrored polarity (``truth["polarity"]``); voltage-domain
+    effects (noise, quantisation) are symmetric and may come before or after. Give
+    ``[falling, rising]`` to draw one per trial. Assumption: the mirror keeps the
+    calibration's shape; a real divider's curve differs in detail.
+    """
+    del rng  # drawn by the core when given as a list
+    name = "fsr_polarity"
+    if polarity not in POLARITIES:
+        raise SimulationError(
+            f"effect {name!r}: polarity must be one of {list(POLARITIES)}; got {polarity!r}"
+        )
+    if state.truth.get("polarity", "falling") == polarity:
+        return state.with_truth(polarity=polarity)
+    lo, hi = map(float, state.truth_value("output_range_V", name))
+    volts = state.signal("fsr", name)
+    return state.with_signal("fsr", (lo + hi) - volts).with_truth(polarity=polarity)
+
+
+@register_effect("fsr_impulse_disturbance")
+def fsr_impulse_disturbance(
+    state: SceneState,
+    rng: np.random.Generator,
+    *,
+    count: Any = (1, 3),
+    amplitude_frac: Any = (0.15, 0.5),
+    rise_s: Any = (0.001, 0.005),
+    duration_s: Any = (0.005, 0.05),
+    margin_s: float = 0.05,
+) -> SceneState:
+    """Sharp impulsive disturbances during the hold: knocks with a millisecond rise.
+
+    Each is a trapezoid with raised-cosine edges: the force changes by ``s A`` over
+    ``r`` (``rise_s``), stays there and returns over ``r`` at the end of its duration
+    ``D`` (``duration_s``; ``r`` is capped at ``D / 2``). ``s`` is a random sign,
+    ``A`` a fraction ``amplitude_frac`` of the pressed force (< 0.95, so the force stays
+    positive), and ``count`` (whole numbers ``[lo, hi]``) knocks fall in the hold phase,
+    at least ``margin_s`` from its ends; every range is drawn per knock. Its slope,
+    up to ``pi A / (2 r)``, reaches a slip event's; ``disturbance = 1`` marks it.
+    Observation (the independent generator of issue 14): +-15-50 % of the holding
+    force, millisecond rise, 5-50 ms long, where ``fsr_disturbance`` gives the paper's
+    gentle 2-6 %, 60-150 ms bumps. The shape is an assumption.
+    """
+    name = "fsr_impulse_disturbance"
+    c_lo, c_hi = _span(count, "count", name)
+    if c_lo != int(c_lo) or c_hi != int(c_hi):
+        raise SimulationError(
+            f"effect {name!r}: count must be whole numbers; got {count!r}"
+        )
+    amp = _span(amplitude_frac, "amplitude_frac", name)
+    if amp[1] >= 0.95:
+        raise SimulationError(
+            f"effect {name!r}: amplitude_frac must stay below 0.95; got {amplitude_frac!r}"
+        )
+    rise = _span(rise_s, "rise_s", name)
+    dur = _span(duration_s, "duration_s", name)
+    margin = _span(margin_s, "margin_s", name)[0]
+    if dur[0] <= 0 or rise[0] <= 0:
+        raise SimulationError(f"effect {name!r}: duration_s and rise_s must be > 0")
+    h0, h1 = map(float, state.truth_value("phases", name)["hold"])
+    lo, hi = h0 + margin, h1 - margin
+    n = int(rng.integers(int(c_lo), int(c_hi) + 1))
+    if n == 0:
+        return state
+    if hi - lo < dur[1]:
+        raise SimulationError(
+            f"effect {name!r}: the hold phase ({h1 - h0:.3g} s) cannot fit a {dur[1]} s knock "
+            f"with margin_s={margin}; lengthen model.hold_s or shorten duration_s"
+        )
+    t = state.time["truth_contact"]
+    fn = float(state.truth_value("normal_force_N", name))
+    durations = _uniform(rng, dur, n)
+    rises = np.minimum(_uniform(rng, rise, n), durations / 2.0)
+    starts = lo + rng.uniform(0.0, 1.0, size=n) * (hi - lo - durations)
+    signs = rng.choice(np.array([-1.0, 1.0]), size=n)
+    amps = signs * fn * _uniform(rng, amp, n)
+    force = state.signal("force", name).copy()
+    marks = state.signal("disturbance", name).copy()
+    for start, length, r, a in zip(starts, durations, rises, amps, strict=True):
+        i0, i1 = np.searchsorted(t, [start, start + length])
+        tau = t[i0:i1] - start
+        edge = np.clip(np.minimum(tau, length - tau) / r, 0.0, 1.0)
+        force[i0:i1] += a * 0.5 * (1.0 - np.cos(np.pi * edge))
         marks[i0:i1] = 1.0
     return _with_force(state, force, name).with_signal("disturbance", marks)

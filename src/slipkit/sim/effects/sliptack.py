@@ -103,7 +103,7 @@ def stick_slip(
     return state.with_signal(target, x + shaped).with_truth(stick_slip_cycles=cycles)
 
 
-@register_effect("gross_deflection")
+@register_effect("gross_deflection", draws={"gain": "uniform"})
 def gross_deflection(
     state: SceneState,
     rng: np.random.Generator,
@@ -130,3 +130,52 @@ def gross_deflection(
     dx_mm = 1e3 * motion.axial_deflection(state.time[target])
     shaped = dx_mm.reshape((-1,) + (1,) * (x.ndim - 1))
     return state.with_signal(target, x + float(gain) * shaped)
+
+
+@register_effect("nib_harmonics", draws={"ratio": "uniform", "phase_deg": "uniform"})
+def nib_harmonics(
+    state: SceneState,
+    rng: np.random.Generator,
+    *,
+    ratio: float,
+    phase_deg: float = 0.0,
+    target: str = "nib",
+) -> SceneState:
+    """A second harmonic on the stick-slip oscillation, locked to its cycles.
+
+    Between breakaways ``b_n`` and ``b_(n+1)`` (``truth["stick_slip_cycles"]``, so list
+    it after ``stick_slip``) the cycle phase is ``phi = 2 pi (t - b_n) / (b_(n+1) - b_n)``;
+    adds ``ratio a_n sin(2 phi + phase)`` (mm), with ``a_n = (2 / pi) D_n`` the
+    fundamental amplitude of an ideal sawtooth of the cycle's peak-to-peak ``2 D_n``
+    (``D_n = break_u - centre_u``). Evaluated at the stream's timestamps, so a slow
+    stream aliases it like the fundamental. Observation (the independent generator of
+    issue 14): a second harmonic of 0.63 of the fundamental; the nib's read-out and a
+    non-ideal release shape it, which the piecewise model leaves out. ``ratio`` is
+    relative to ``a_n``; the measured ratio also carries the waveform's own harmonic
+    (0.5 for an ideal sawtooth), at a phase set by ``phase_deg``.
+    """
+    del rng  # drawn by the core when given as a range
+    name = "nib_harmonics"
+    if not (np.isfinite(ratio) and ratio >= 0):
+        raise SimulationError(f"effect {name!r}: ratio must be >= 0; got {ratio!r}")
+    if not np.isfinite(phase_deg):
+        raise SimulationError(
+            f"effect {name!r}: phase_deg must be finite; got {phase_deg!r}"
+        )
+    cycles = state.truth.get("stick_slip_cycles")
+    x = state.signal(target, name)
+    if "stick_slip_cycles" not in state.truth:
+        raise SimulationError(
+            f"effect {name!r} needs the stick-slip cycles: list it after 'stick_slip'"
+        )
+    if cycles is None or cycles.n_cycles < 2:
+        return state
+    t = state.time[target]
+    b = cycles.break_s
+    n = np.searchsorted(b, t, side="right") - 1
+    inside = (n >= 0) & (n < len(b) - 1)
+    k = np.clip(n, 0, len(b) - 2)
+    phi = 2.0 * np.pi * (t - b[k]) / (b[k + 1] - b[k])
+    a = 1e3 * (2.0 / np.pi) * np.abs(cycles.break_u[k] - cycles.centre_u[k])
+    extra = np.where(inside, ratio * a * np.sin(2.0 * phi + np.deg2rad(phase_deg)), 0.0)
+    return state.with_signal(target, x + extra.reshape((-1,) + (1,) * (x.ndim - 1)))

@@ -1,5 +1,5 @@
-"""TacTip effects: skin stretch, snap-back at slip onset, post-slip sliding, pin
-detection jitter and missing pins (James, Pestell, Lepora 2018, RA-L 3(4)).
+"""TacTip effects: skin stretch, partial-slip creep, snap-back at slip onset, post-slip
+sliding, pin detection jitter and missing pins (James, Pestell, Lepora 2018, RA-L 3(4)).
 
 Every effect acts on the ``pins`` signal, shape (T, N, 2) in mm, aligned with
 ``time["pins"]``; the contact physics is evaluated at those times from the trial's
@@ -8,10 +8,12 @@ Every effect acts on the ``pins`` signal, shape (T, N, 2) in mm, aligned with
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from scipy.signal import lfilter
 
-from slipkit.physics.tactip import mindlin_stretch
+from slipkit.physics.tactip import contact_semi_axes, mindlin_stretch
 from slipkit.sim.core import SceneState, SimulationError, register_effect
 from slipkit.sim.effects.common import white_noise
 from slipkit.sim.scenes.tactip import TacTipTrial
@@ -52,7 +54,7 @@ def skin_stretch(state: SceneState, rng: np.random.Generator) -> SceneState:
     return state.with_signal("pins", _shift(pins, u, tr.load_dir))
 
 
-@register_effect("snap_back")
+@register_effect("snap_back", draws={"tau_s": "uniform"})
 def snap_back(
     state: SceneState, rng: np.random.Generator, *, tau_s: float = 0.02
 ) -> SceneState:
@@ -82,7 +84,10 @@ def snap_back(
     return state.with_signal("pins", _shift(pins, u, -tr.load_dir))
 
 
-@register_effect("slip_sliding")
+@register_effect(
+    "slip_sliding",
+    draws={"sigma_mm": "log", "corr_s": "uniform", "ramp_s": "uniform"},
+)
 def slip_sliding(
     state: SceneState,
     rng: np.random.Generator,
@@ -123,7 +128,7 @@ def slip_sliding(
     return state.with_signal("pins", out)
 
 
-@register_effect("pin_jitter")
+@register_effect("pin_jitter", draws={"sigma_mm": "log"})
 def pin_jitter(
     state: SceneState, rng: np.random.Generator, *, sigma_mm: float
 ) -> SceneState:
@@ -141,7 +146,7 @@ def pin_jitter(
     return white_noise(state, rng, target="pins", sigma=sigma_mm)
 
 
-@register_effect("missing_pins")
+@register_effect("missing_pins", draws={"probability": "uniform"})
 def missing_pins(
     state: SceneState, rng: np.random.Generator, *, probability: float
 ) -> SceneState:
@@ -159,3 +164,97 @@ def missing_pins(
     miss = rng.random(pins.shape[:2]) < probability
     pins[miss] = np.nan
     return state.with_signal("pins", pins)
+
+
+@register_effect("missing_pin_frames", draws={"frame_probability": "uniform"})
+def missing_pin_frames(
+    state: SceneState,
+    rng: np.random.Generator,
+    *,
+    frame_probability: float,
+    count: Any = (1, 5),
+) -> SceneState:
+    """Frames with a few undetected pins: with ``frame_probability`` a frame loses
+    ``k`` pins (NaN), ``k`` uniform on the integers of ``count`` = ``[lo, hi]``, the
+    pins chosen uniformly without replacement.
+
+    Observation (the independent generator of issue 14): 1-5 NaN pins in ~3 % of
+    frames, i.e. misses come in bursts within a frame (a glare patch, a blurred frame)
+    rather than independently per pin as in ``missing_pins``. Assumption: affected
+    frames are independent of each other and of the motion.
+    """
+    name = "missing_pin_frames"
+    if not 0.0 <= frame_probability <= 1.0:
+        raise SimulationError(
+            f"effect {name!r}: frame_probability must be in [0, 1]; got {frame_probability!r}"
+        )
+    lo, hi = _count_range(count, name)
+    pins = np.array(state.signal("pins", name), dtype=np.float64, copy=True)
+    n_frames, n_pins = pins.shape[:2]
+    hit = np.flatnonzero(rng.random(n_frames) < frame_probability)
+    if len(hit) == 0:
+        return state.with_signal("pins", pins)
+    k = np.minimum(rng.integers(lo, hi + 1, size=len(hit)), n_pins)
+    # Rank of each pin in a random permutation per frame: the k lowest are lost.
+    ranks = rng.random((len(hit), n_pins)).argsort(axis=1).argsort(axis=1)
+    lost = ranks < k[:, None]
+    sub = pins[hit]
+    sub[lost] = np.nan
+    pins[hit] = sub
+    return state.with_signal("pins", pins)
+
+
+def _count_range(value: Any, effect: str) -> tuple[int, int]:
+    """A whole number or ``[lo, hi]`` of whole numbers >= 0."""
+    items = list(value) if isinstance(value, list | tuple) else [value, value]
+    ok = len(items) == 2 and all(
+        isinstance(v, int | float) and float(v).is_integer() and v >= 0 for v in items
+    )
+    if not ok or items[1] < items[0]:
+        raise SimulationError(
+            f"effect {effect!r}: count must be a whole number or [lo, hi] with "
+            f"0 <= lo <= hi; got {value!r}"
+        )
+    return int(items[0]), int(items[1])
+
+
+@register_effect("mindlin_creep", draws={"amplitude_mm": "uniform"})
+def mindlin_creep(
+    state: SceneState, rng: np.random.Generator, *, amplitude_mm: float
+) -> SceneState:
+    """Partial-slip creep before onset: micro-slip spreading inward from the contact edge.
+
+    Cattaneo-Mindlin (Johnson, *Contact Mechanics*, 1985, Sec. 7.2): under a tangential
+    load ``Q`` below ``μ_s P`` the contact sticks inside a radius ``c`` and slips in the
+    annulus ``c < r < a``, with ``c / a = (1 - ρ)^(1/3)``, ``ρ = Q / (μ_s P)`` (the
+    trial's ``load_ratio``). As the grip falls ``ρ`` grows to 1, the stick zone
+    shrinks to nothing and gross slip starts. Pin ``i`` at normalised elliptic radius
+    ``q_i = sqrt((x/a_x)^2 + (y/a_y)^2)`` creeps along the load direction by
+    ``A ρ(t) h_i(t) w_i(t)``, ``h = clip((q^2 - c^2) / (1 - c^2), 0, 1)`` (0 in the
+    stick zone, 1 at and beyond the edge), ``w`` the contact weight; frozen at its
+    onset value (``ρ = 1``, ``c = 0``) afterwards. ``A = amplitude_mm`` (mm) is the
+    creep of an edge pin at onset. Observation: the independent generator of issue 14
+    shows such a creep before onset; the profile ``h`` is an assumption (Johnson's
+    annulus slip grows from 0 at ``c`` to its largest at ``a``).
+    """
+    del rng  # deterministic
+    name = "mindlin_creep"
+    if not (np.isfinite(amplitude_mm) and amplitude_mm >= 0):
+        raise SimulationError(
+            f"effect {name!r}: amplitude_mm must be >= 0; got {amplitude_mm!r}"
+        )
+    tr = _trial(state, name)
+    t = state.time["pins"]
+    pins = state.signal("pins", name)
+    tc = np.minimum(t, tr.onset_s)  # frozen at the onset
+    rho = np.clip(tr.load_ratio(tc), 0.0, 1.0)
+    rho = np.where(t >= tr.onset_s, 1.0, rho)
+    c2 = ((1.0 - rho) ** (1.0 / 3.0))[:, None] ** 2
+    ax, ay = contact_semi_axes(tr.indentation(tc), tr.object_radius, tr.tip_radius_mm)
+    x, y = tr.rest_xy[None, :, 0], tr.rest_xy[None, :, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q2 = (x / ax[:, None]) ** 2 + (y / ay[:, None]) ** 2
+        h = np.clip((q2 - c2) / (1.0 - c2), 0.0, 1.0)
+    h = np.where(c2 < 1.0, np.nan_to_num(h, nan=0.0), 0.0)
+    u = amplitude_mm * rho[:, None] * h * tr.weights(tc)
+    return state.with_signal("pins", _shift(pins, u, tr.load_dir))

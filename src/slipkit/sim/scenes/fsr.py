@@ -249,4 +249,10 @@ class FSRProbeSlide:
             "pass_s": float(state.truth["pass_s"]),
             "n_slip_events": int(state.truth["n_slip_events"]),
         }
-        return streams, labels, {}
+        # Only a scene listing fsr_polarity sets it, so base datasets keep their columns.
+        meta = (
+            {"polarity": str(state.truth["polarity"])}
+            if "polarity" in state.truth
+            else {}
+        )
+        return streams, labels, meta
