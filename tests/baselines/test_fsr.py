@@ -120,7 +120,7 @@ def test_simulated_touch_is_not_slip() -> None:
 def test_no_touch_no_slip() -> None:
     """A recording that starts pressed never sees a touch, so spikes are not slip."""
     X = press_then_spikes()[60:]
-    det = FSRTouchSlip(threshold=1.0).fit(X, np.zeros(len(X), int))
+    det = FSRTouchSlip(threshold=1.0, polarity="falling").fit(X, np.zeros(len(X), int))
     assert np.isneginf(det.decision_function(X)).all()
 
 
@@ -164,7 +164,7 @@ def test_constant_and_short_signals_never_fire(
 ) -> None:
     """A constant signal (no touch) and anything shorter than the rest period score -inf."""
     X = np.full((n, 1), level)
-    det = FSRTouchSlip(input=input_, threshold=0.0).fit(
+    det = FSRTouchSlip(input=input_, threshold=0.0, polarity="falling").fit(
         np.full((20, 1), level), np.zeros(20, int)
     )
     scores, dec = det.replay(X)

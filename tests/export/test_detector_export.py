@@ -269,7 +269,7 @@ def test_fsr_graph_equals_the_detector_after_a_rest_period(
     window: Arr, input_: str
 ) -> None:
     """Graph(window) == detector score at the window's end after 10 rest samples; NaN/inf: NO_SCORE."""
-    det = FSRTouchSlip(input=input_, threshold=8.0).fit(
+    det = FSRTouchSlip(input=input_, threshold=8.0, polarity="falling").fit(
         np.full((20, 1), 4.5), np.zeros(20, int)
     )
     graph = _fsr_graph(input_)
@@ -287,7 +287,7 @@ def test_fsr_graph_equals_the_detector_after_a_rest_period(
 
 @lru_cache(maxsize=2)
 def _fsr_graph(input_: str) -> DetectorGraph:
-    det = FSRTouchSlip(input=input_, threshold=8.0).fit(
+    det = FSRTouchSlip(input=input_, threshold=8.0, polarity="falling").fit(
         np.full((20, 1), 4.5), np.zeros(20, int)
     )
     return export_fsr_touch_slip(det, rest=4.5)

@@ -30,7 +30,7 @@ FLAT_REL = 1e-12
 
 def _detectors() -> list[Any]:
     return [
-        FSRTouchSlip(threshold=1.0),
+        FSRTouchSlip(threshold=1.0, polarity="falling"),
         PressureVibration(threshold=1.0),
         ForceDerivative(threshold=1.0),
         TorsionalSlipDetector(threshold=1.0),

@@ -29,22 +29,52 @@ paper's slip stage only runs after a touch (Fig. 2).
 NaN policy: a non-finite sample makes its block mean NaN, so that block and the next
 score ``-inf`` (no decision on missing data); the rest mean averages the finite samples
 of the rest period (all of them missing: no touch is ever seen).
+
+**Polarity (the wiring convention, checked).** The paper's divider makes the voltage
+*fall* as the force rises; the other common wiring makes it *rise*. ``polarity`` says
+which (``"falling"``, ``"rising"``) or, with ``"auto"`` (the default), ``fit`` learns it
+from the training recordings: every recording's samples that leave its rest mean by more
+than ``delta`` vote for the direction they moved (a press), and the recordings must
+agree. Training data in which no recording is ever pressed is refused
+(:class:`~slipkit.errors.SlipkitError` naming the data), also with a fixed threshold:
+with an unknown polarity the detector would otherwise look at the wrong sign and
+silently never fire. Slip is the opposite of a press: a voltage moving back towards
+rest (rising for ``"falling"``, falling for ``"rising"``), a falling force. For
+``input="force"`` the calibration must turn a press into a rising force; a calibration
+that does not match the wiring is refused. ``fit`` also records ``rest_V_``, the median
+rest voltage of the training recordings, the constant the ONNX graph's touch gate uses.
+
+**Confirmation (``confirm_events``, a slipkit addition against impulsive bumps).** One
+sharp external bump (tens of % of the holding force in a millisecond) gives one large
+derivative, as large as a slip event's; a slide is a *train* of stick-slip events. With
+``confirm_events = k >= 2`` a block's derivative counts as an *event* when it is a peak
+(larger than the ``peak_gap_s`` before it, at least as large as the ``peak_gap_s`` after
+it, so it is confirmed ``peak_gap_s`` later), and the score is the ``k``-th largest event
+within the last ``confirm_window_s``: ``score >= alpha`` means "at least ``k`` separate
+events of at least ``alpha`` within the window". ``k = 1`` (the default) is the paper's
+detector exactly. The ``fsr_robust`` config uses ``k = 2`` over 0.3 s.
 """
 
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Sequence
 from numbers import Integral, Real
 from typing import Any, ClassVar
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike, NDArray
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
 from slipkit.baselines.base import FloatArray, StreamDetector, segment_bounds
+from slipkit.errors import SlipkitError
 from slipkit.physics.fsr import DEFAULT_CALIBRATION
+
+#: The voltage direction under a press for each wiring: -1 falls (the paper), +1 rises.
+PRESS_DIRECTION = {"falling": -1.0, "rising": 1.0}
 
 #: ``delta`` when not given, per input: a 0.2 V drop is a ~0.1 N press with the default
 #: calibration (200x the 1 mV conditioning noise, below the FSR 402's 0.2 N threshold).
@@ -82,6 +112,20 @@ class FSRTouchSlip(StreamDetector):
     calibration : sequence of 5 floats or None
         ``p1..p5`` of eq. 6 (N from V) for ``input="force"``; None: the default
         :data:`slipkit.physics.fsr.DEFAULT_CALIBRATION`.
+    polarity : {"auto", "falling", "rising"}
+        How the conditioned voltage moves when the FSR is pressed: ``"falling"`` (the
+        paper's divider), ``"rising"`` (the other common wiring), or ``"auto"``: learned
+        by ``fit`` from the training recordings (which must include a press).
+    confirm_events : int
+        Separate derivative peaks of at least ``alpha`` needed within
+        ``confirm_window_s`` to declare slip; 1 is the paper's detector (one block).
+    confirm_window_s : float
+        Window (s) in which ``confirm_events`` peaks must fall (``confirm_events >= 2``).
+    peak_gap_s : float
+        A block's derivative is a peak when it exceeds every block in the
+        ``peak_gap_s`` (s) before it and is not exceeded in the ``peak_gap_s`` after
+        it (one bump's edge spans a few blocks and gives one peak); a peak is known
+        ``peak_gap_s`` after its block.
     threshold : float or None
         ``alpha`` in V/s (N/s for force); None chooses it on the ROC in ``fit``.
     roc_point : {"youden", "closest"}
@@ -93,6 +137,14 @@ class FSRTouchSlip(StreamDetector):
         ``alpha`` (V/s, or N/s for force input).
     delta_ : float
         The touch threshold used (V or N).
+    polarity_ : {"falling", "rising"}
+        The voltage direction under a press (given, or learned in ``fit``).
+    polarity_votes_ : dict
+        Training recordings whose press fell / rose / that were never pressed
+        (``{"falling": n, "rising": n, "untouched": n}``).
+    rest_V_ : float
+        Median over the training recordings of the rest voltage (V): the mean of each
+        recording's first ``rest_samples`` finite samples (NaN if none).
     classes_, roc_fpr_, roc_tpr_, roc_thresholds_, auc_, tpr_, tnr_, fpr_, fnr_, n_features_in_
         See :class:`~slipkit.baselines.base.StreamDetector`.
     """
@@ -105,6 +157,10 @@ class FSRTouchSlip(StreamDetector):
         "rest_samples": [Interval(Integral, 1, None, closed="left")],
         "delta": [Interval(Real, 0, None, closed="left"), None],
         "calibration": ["array-like", None],
+        "polarity": [StrOptions({"auto", "falling", "rising"})],
+        "confirm_events": [Interval(Integral, 1, None, closed="left")],
+        "confirm_window_s": [Interval(Real, 0, None, closed="neither")],
+        "peak_gap_s": [Interval(Real, 0, None, closed="neither")],
     }
     n_channels: ClassVar[int | None] = 1
 
@@ -117,6 +173,10 @@ class FSRTouchSlip(StreamDetector):
         rest_samples: int = 10,
         delta: float | None = None,
         calibration: Sequence[float] | None = None,
+        polarity: str = "auto",
+        confirm_events: int = 1,
+        confirm_window_s: float = 0.3,
+        peak_gap_s: float = 0.01,
         threshold: float | None = None,
         roc_point: str = "youden",
     ) -> None:
@@ -127,12 +187,45 @@ class FSRTouchSlip(StreamDetector):
         self.rest_samples = rest_samples
         self.delta = delta
         self.calibration = calibration
+        self.polarity = polarity
+        self.confirm_events = confirm_events
+        self.confirm_window_s = confirm_window_s
+        self.peak_gap_s = peak_gap_s
 
     # -- settings -----------------------------------------------------------------
     @property
+    def _polarity(self) -> str:
+        known = getattr(self, "polarity_", None)
+        if known is not None:
+            return str(known)
+        if self.polarity == "auto":
+            raise SlipkitError(
+                "FSRTouchSlip: polarity 'auto' is learned by fit from recordings that "
+                "include a press; call fit, or set polarity to 'falling' (voltage falls "
+                "with force, the paper) or 'rising'"
+            )
+        return str(self.polarity)
+
+    @property
     def _sign(self) -> float:
-        # +1: a rising voltage is a pressure release; -1: a falling force is.
-        return 1.0 if self.input == "voltage" else -1.0
+        # The slip direction of the signal the detector reads: the opposite of a press.
+        # Voltage: +1 (rising) for the paper's falling wiring, -1 for a rising one;
+        # force (the calibration makes a press a rising force): -1.
+        if self.input == "force":
+            return -1.0
+        return -PRESS_DIRECTION[self._polarity]
+
+    @property
+    def _peak_gap(self) -> int:
+        # blocks a peak must dominate on each side (at least one)
+        return max(1, math.ceil(float(self.peak_gap_s) * self._per_s - 1e-9))
+
+    @property
+    def _confirm_blocks(self) -> int:
+        # blocks of the confirmation window (at least confirm_events)
+        return max(
+            int(self.confirm_events), round(float(self.confirm_window_s) * self._per_s)
+        )
 
     @property
     def _delta(self) -> float:
@@ -161,6 +254,91 @@ class FSRTouchSlip(StreamDetector):
         if self.input == "voltage":
             return v
         return np.asarray(np.polyval(self._coeffs(), v), dtype=np.float64)
+
+    def _rest_means(self, v: FloatArray, segments: ArrayLike | None) -> list[float]:
+        """Rest mean (V) of every recording (NaN without a finite rest sample)."""
+        out = []
+        for a, z in segment_bounds(len(v), segments):
+            head = v[a:z][: int(self.rest_samples)]
+            finite = head[np.isfinite(head)]
+            out.append(float(np.mean(finite)) if finite.size else math.nan)
+        return out
+
+    def _learn_polarity(self, v: FloatArray, segments: ArrayLike | None) -> None:
+        """Set ``polarity_``, ``polarity_votes_`` and ``rest_V_`` from voltages ``v``."""
+        # The press is found on the voltage with a voltage threshold: delta for
+        # voltage input, or the default 0.2 V for force input (its delta is in N).
+        dv = (
+            float(self.delta)
+            if self.input == "voltage" and self.delta is not None
+            else (DEFAULT_DELTA["voltage"])
+        )
+        votes = {"falling": 0, "rising": 0, "untouched": 0}
+        voted: dict[str, list[int]] = {"falling": [], "rising": []}
+        rests = self._rest_means(v, segments)
+        for k, ((a, z), rest) in enumerate(
+            zip(segment_bounds(len(v), segments), rests, strict=True)
+        ):
+            dev = v[a + int(self.rest_samples) : z] - rest
+            with np.errstate(invalid="ignore"):
+                up, down = int(np.sum(dev > dv)), int(np.sum(dev < -dv))
+            if up == down == 0:
+                votes["untouched"] += 1
+                continue
+            side = "rising" if up > down else "falling"
+            votes[side] += 1
+            voted[side].append(k)
+        self.polarity_votes_ = votes
+        finite = [r for r in rests if math.isfinite(r)]
+        self.rest_V_ = float(np.median(finite)) if finite else math.nan
+        n = len(rests)
+        if self.polarity != "auto":
+            self.polarity_ = str(self.polarity)
+        elif votes["falling"] == votes["rising"] == 0:
+            raise SlipkitError(
+                f"FSRTouchSlip(polarity='auto'): the training data ({n} recording(s), "
+                f"{len(v)} samples) never shows a touch -- no sample moves more than "
+                f"{dv:g} V from its recording's rest mean (first {self.rest_samples} "
+                "samples), so the press direction cannot be learned; fit on recordings "
+                "that start at rest and include a press, or set polarity to 'falling' "
+                "(voltage falls with force, the paper's divider) or 'rising'"
+            )
+        elif votes["falling"] and votes["rising"]:
+            raise SlipkitError(
+                "FSRTouchSlip(polarity='auto'): the training recordings disagree on the "
+                f"press direction: recordings {voted['falling'][:10]} fall, "
+                f"{voted['rising'][:10]} rise under a press (0-based, in segment order); "
+                "one detector serves one wiring -- split the data or set polarity"
+            )
+        else:
+            self.polarity_ = "falling" if votes["falling"] else "rising"
+        if self.input == "force" and math.isfinite(self.rest_V_):
+            # The calibration must turn a press into a rising force.
+            slope = float(np.polyval(np.polyder(self._coeffs()), self.rest_V_))
+            if slope * PRESS_DIRECTION[self.polarity_] <= 0:
+                raise SlipkitError(
+                    f"FSRTouchSlip(input='force'): the calibration {self._coeffs().tolist()} "
+                    f"has dF/dV = {slope:.4g} N/V at the rest voltage {self.rest_V_:.4g} V, "
+                    f"so a press (voltage {self.polarity_}) would read as a falling force; "
+                    "give the calibration of this wiring"
+                )
+
+    def fit(
+        self, X: ArrayLike, y: ArrayLike, *, segments: ArrayLike | None = None
+    ) -> FSRTouchSlip:
+        """Learn the polarity (``polarity="auto"``), then choose ``threshold_``.
+
+        See :meth:`StreamDetector.fit <slipkit.baselines.base.StreamDetector.fit>`.
+        Raises :class:`~slipkit.errors.SlipkitError` when ``polarity="auto"`` and no
+        training recording is ever pressed, or the recordings disagree.
+        """
+        self._validate_params()
+        Xv = self._check_X(X, reset=True)
+        for name in ("polarity_", "polarity_votes_", "rest_V_"):
+            self.__dict__.pop(name, None)
+        self._learn_polarity(Xv[:, 0], segments)
+        super().fit(Xv, y, segments=segments)
+        return self
 
     def _calibrate(
         self,
@@ -203,11 +381,37 @@ class FSRTouchSlip(StreamDetector):
         out[valid] = per_block[b[valid]]
         return out
 
+    def _confirmed(self, d: FloatArray) -> FloatArray:
+        """Per block: the ``confirm_events``-th largest peak of ``d`` (the paper's
+        block scores, ``-inf`` where none) among the peaks known at that block
+        (the streaming form computes the same numbers incrementally)."""
+        nb, r, wb, k = (
+            len(d),
+            self._peak_gap,
+            self._confirm_blocks,
+            int(self.confirm_events),
+        )
+        out = np.full(nb, -np.inf)
+        if nb <= r:
+            return out
+        pad = np.concatenate([np.full(r, -np.inf), d])
+        left = sliding_window_view(pad, r)[: nb - r].max(axis=1)  # d[b-r .. b-1]
+        right = sliding_window_view(d[1:], r).max(axis=1)  # d[b+1 .. b+r]
+        mid = d[: nb - r]
+        peak = np.isfinite(mid) & (mid > left) & (mid >= right)
+        pv = np.where(peak, mid, -np.inf)  # peak of block b, known at block b + r
+        win = sliding_window_view(np.concatenate([np.full(wb - 1, -np.inf), pv]), wb)
+        out[r:] = np.partition(win, wb - k, axis=1)[:, wb - k]
+        return out
+
     def _scores(self, X: FloatArray) -> FloatArray:
         deriv, press = self._block_stats(self._signal(X[:, 0]))
         with np.errstate(invalid="ignore"):
             ok = (press > self._delta) & np.isfinite(deriv)
-        return self._per_sample(np.where(ok, deriv, -np.inf), len(X), -np.inf)
+        per_block = np.where(ok, deriv, -np.inf)
+        if int(self.confirm_events) > 1:
+            per_block = self._confirmed(per_block)
+        return self._per_sample(per_block, len(X), -np.inf)
 
     def touch(
         self, X: ArrayLike, *, segments: ArrayLike | None = None
@@ -238,6 +442,9 @@ class FSRStream:
     """
 
     def __init__(self, detector: FSRTouchSlip) -> None:
+        self._need = int(detector.confirm_events)
+        self._gap = detector._peak_gap
+        self._wb = detector._confirm_blocks
         self._force = detector.input == "force"
         self._coeffs = detector._coeffs() if self._force else None
         self._sign = detector._sign
@@ -257,6 +464,13 @@ class FSRStream:
         self._prev = np.nan
         self._score = -np.inf
         self.touched = False
+        # confirmation: the last 2 gap + 1 block scores (oldest first) and the peaks
+        # (block, score) inside the window
+        self._block_i = -1
+        self._recent: deque[float] = deque(
+            [-math.inf] * (2 * self._gap + 1), maxlen=2 * self._gap + 1
+        )
+        self._peaks: deque[tuple[int, float]] = deque()
 
     def update(self, sample: ArrayLike) -> tuple[float, bool]:
         """Feed one voltage sample (V); return (score in V/s or N/s, slip)."""
@@ -275,11 +489,33 @@ class FSRStream:
                 deriv = self._sign * (mean - self._prev) * self._per_s
                 self.touched = bool(self._sign * (rest - mean) > self._delta)
                 ok = self.touched and math.isfinite(deriv)
-                self._score = deriv if ok else -np.inf
+                block_score = deriv if ok else -np.inf
+            else:
+                block_score = -np.inf
+            self._block_i += 1
+            if self._need > 1:
+                self._score = self._confirm(block_score)
+            elif self._i // self._block >= self._first:
+                self._score = block_score
             self._prev = mean
             self._acc, self._k = 0.0, 0
         self._i += 1
         return self._score, self._score >= self._threshold
+
+    def _confirm(self, block_score: float) -> float:
+        """Push one block score; return the confirmed score at this block."""
+        c, r = self._block_i, self._gap
+        self._recent.append(block_score)
+        if c >= r:  # the block r back is now a peak or not
+            vals = list(self._recent)
+            mid = vals[r]
+            if math.isfinite(mid) and mid > max(vals[:r]) and mid >= max(vals[r + 1 :]):
+                self._peaks.append((c - r, mid))
+        while self._peaks and self._peaks[0][0] <= c - r - self._wb:
+            self._peaks.popleft()
+        if c < r or len(self._peaks) < self._need:
+            return -math.inf
+        return sorted(v for _, v in self._peaks)[-self._need]
 
 
 __all__ = ["DEFAULT_DELTA", "FSRStream", "FSRTouchSlip"]

@@ -300,9 +300,12 @@ def export_fsr_touch_slip(
         which estimates one sensor constant (the conditioned voltage at zero force);
         a fixed window cannot see a recording's start, so the graph takes that
         constant: measured at calibration (the mean of unloaded samples), or None
-        for the calibration polynomial's zero-force voltage
-        (:func:`slipkit.physics.fsr.rest_voltage`, 4.5 V by default). With
-        ``input="force"`` the graph's rest force is ``F(rest)``.
+        for the detector's ``rest_V_`` (the median rest voltage of its training
+        recordings), or, if that is not finite, the calibration polynomial's
+        zero-force voltage (:func:`slipkit.physics.fsr.rest_voltage`, 4.5 V by
+        default; the paper's falling wiring only). With ``input="force"`` the
+        graph's rest force is ``F(rest)``. The slip sign and the gate follow the
+        detector's fitted ``polarity_``.
     gate : bool
         False leaves the touch gate out: the score is the signed block derivative at
         every block (untouched blocks then get a score, not ``NO_SCORE``).
@@ -318,17 +321,31 @@ def export_fsr_touch_slip(
         sample (14 for 10 rest samples and 5-sample blocks).
     """
     check_is_fitted(detector, "threshold_")
+    if int(detector.confirm_events) > 1:
+        raise ExportError(
+            f"FSR export: confirm_events={detector.confirm_events} (the confirmed, "
+            "bump-robust variant) has no ONNX graph yet; only the paper's one-block "
+            "rule (confirm_events=1) exports"
+        )
     b = int(detector.block)
     w = 2 * b
     sign = detector._sign
+    polarity = detector._polarity
     per_s = detector._per_s
     delta = float(getattr(detector, "delta_", detector._delta))
     coeffs = detector._coeffs() if detector.input == "force" else None
-    v_rest = (
-        float(rest_voltage(tuple(detector._coeffs().tolist())))
-        if rest is None
-        else float(rest)
-    )
+    fitted_rest = float(getattr(detector, "rest_V_", math.nan))
+    if rest is not None:
+        v_rest = float(rest)
+    elif math.isfinite(fitted_rest):
+        v_rest = fitted_rest
+    elif polarity == "falling":
+        v_rest = float(rest_voltage(tuple(detector._coeffs().tolist())))
+    else:
+        raise ExportError(
+            "FSR export: the detector has no measured rest voltage (rest_V_) and the "
+            "calibration's zero-force voltage assumes the falling wiring; pass rest=..."
+        )
     if not math.isfinite(v_rest):
         raise ExportError(
             f"FSR export: rest must be a finite voltage (V); got {rest!r}"
@@ -389,7 +406,7 @@ def export_fsr_touch_slip(
         first_decision=detector._first_block * b + b - 1,
         score_meaning=(
             f"FSRTouchSlip.decision_function at the window's last sample (a block end): "
-            f"{'rising voltage' if sign > 0 else 'falling force'} derivative of the block "
+            f"{'rising' if sign > 0 else 'falling'} {detector.input} derivative of the block "
             f"means ({unit}); {NO_SCORE:g} (the detector's -inf) "
             + ("when untouched or " if gate else "")
             + "on non-finite samples; slip ('1') where score >= threshold"
@@ -397,6 +414,7 @@ def export_fsr_touch_slip(
         input_meaning=f"the last {w} FSR voltage samples (V) at {detector.rate_hz:g} Hz, oldest first",
         features={
             "input": detector.input,
+            "polarity": polarity,
             "block": b,
             "rate_hz": float(detector.rate_hz),
             "gate": bool(gate),

@@ -1,0 +1,325 @@
+"""Detectors whose conventions are explicit and checked (issue 14): FSR polarity and sharp
+bumps, SlipTack rates, harmonics and normal force.
+
+The FSR signals here come from a small generator written for these tests, independent of
+``slipkit.sim`` (its own force shapes, its own force-to-voltage law, either wiring):
+a press, a hold, then either a slide made of stick-slip events (a sudden force drop of
+5-15 % with a short ring, then a linear stick ramp back) or sharp impulsive bumps (+-15-50 %
+of the holding force, 1-5 ms edges, 5-50 ms long, at least 0.4 s apart). Run this file
+as a script to print the detection table quoted in ``docs/baselines/fsr.md``::
+
+    .venv/bin/python tests/baselines/test_conventions.py
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+
+import numpy as np
+import pytest
+
+from slipkit.baselines.fsr import FSRTouchSlip
+from slipkit.errors import SlipkitError
+
+RATE = 2000.0  # Hz
+
+
+# -- an independent FSR signal generator ------------------------------------------------
+@dataclass
+class FSRTrial:
+    """One generated recording: voltage (V) and what happened when (s)."""
+
+    v: np.ndarray
+    slide: tuple[float, float] | None  # (start, end) of the slide
+    events: list[float] = field(default_factory=list)  # stick-slip onsets
+    bumps: list[tuple[float, float]] = field(default_factory=list)  # (start, end)
+
+    @property
+    def t(self) -> np.ndarray:
+        return np.arange(len(self.v)) / RATE
+
+
+def _volts(force: np.ndarray, polarity: str) -> np.ndarray:
+    """A saturating divider law (not the simulator's eq. 6): 0 N at rest, 3 V span."""
+    u = 3.0 * force / (force + 2.0)
+    return 4.2 - u if polarity == "falling" else 0.4 + u
+
+
+def fsr_trial(
+    rng: np.random.Generator, *, polarity: str, slide: bool, noise_V: float = 2e-3
+) -> FSRTrial:
+    """A press to 1-5 N, then a 1-3 s slide (``slide``) or a 2 s hold with sharp bumps."""
+    f0 = rng.uniform(1.0, 5.0)
+    rest_s, rise_s = 0.1, 0.01
+    hold_s = 0.5 if slide else 2.0
+    slide_s = rng.uniform(1.0, 3.0) if slide else 0.0
+    t0 = rest_s + rise_s + hold_s  # slide start
+    n = int((t0 + slide_s + 0.05) * RATE)
+    t = np.arange(n) / RATE
+    force = np.clip((t - rest_s) / rise_s, 0.0, 1.0) * f0
+    trial = FSRTrial(v=np.empty(0), slide=(t0, t0 + slide_s) if slide else None)
+    if slide:
+        onsets = []
+        e = t0 + rng.uniform(0.02, 0.1)
+        while e < t0 + slide_s - 0.02:
+            onsets.append(e)
+            e += rng.uniform(0.04, 0.2)  # 5-25 events per second
+        for e, nxt in itertools.pairwise([*onsets, t0 + slide_s]):
+            drop = rng.uniform(0.05, 0.15) * f0
+            fall = rng.uniform(5e-4, 2e-3)
+            dt = t - e
+            on = (dt >= 0) & (t < nxt)
+            shape = np.where(
+                dt < fall, dt / fall, 1.0 - (dt - fall) / max(nxt - e - fall, 1e-3)
+            )
+            ring_hz = rng.uniform(80.0, 180.0)
+            tau = np.maximum(dt, 0.0)
+            ring = 0.3 * np.exp(-tau / 4e-3) * np.sin(2 * np.pi * ring_hz * tau)
+            force[on] -= drop * (shape[on] + ring[on] * (dt[on] >= fall))
+        trial.events = onsets
+    else:
+        b = rest_s + rise_s + 0.1 + rng.uniform(0.0, 0.3)
+        while b < t0 - 0.1:
+            amp = rng.choice([-1.0, 1.0]) * rng.uniform(0.15, 0.5) * f0
+            edge = rng.uniform(1e-3, 5e-3)
+            length = rng.uniform(max(5e-3, 2 * edge), 50e-3)
+            dt = t - b
+            up = np.clip(dt / edge, 0.0, 1.0)
+            down = np.clip((length - dt) / edge, 0.0, 1.0)
+            force += amp * np.minimum(up, down) * (dt >= 0)
+            trial.bumps.append((b, b + length))
+            b += length + rng.uniform(0.4, 0.8)
+    trial.v = _volts(np.maximum(force, 0.0), polarity) + rng.normal(0.0, noise_V, n)
+    return trial
+
+
+def fsr_trials(seed: int, n: int, *, polarity: str, slide: bool) -> list[FSRTrial]:
+    """``n`` trials; trial ``i`` draws from ``default_rng([seed, i])``."""
+    return [
+        fsr_trial(np.random.default_rng([seed, i]), polarity=polarity, slide=slide)
+        for i in range(n)
+    ]
+
+
+def event_labels(trial: FSRTrial, width_s: float = 0.01) -> np.ndarray:
+    """1 for ``width_s`` after each stick-slip onset (the paper's induced-slip unit)."""
+    t = trial.t
+    y = np.zeros(len(t), int)
+    for e in trial.events:
+        y[(t >= e) & (t < e + width_s)] = 1
+    return y
+
+
+def stack(trials: list[FSRTrial]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(X, event labels, segments) of the trials."""
+    X = np.concatenate([tr.v for tr in trials])[:, None]
+    y = np.concatenate([event_labels(tr) for tr in trials])
+    seg = np.concatenate([np.full(len(tr.v), k) for k, tr in enumerate(trials)])
+    return X, y, seg
+
+
+def event_alpha(polarity: str) -> float:
+    """Alpha (V/s) on the event ROC of 12 training slides (seed 100), as the paper and
+    the detection task do: each stick-slip onset is a positive unit (its largest score
+    within 10 ms), each 10 ms window before the slide a negative one; Youden's J."""
+    from sklearn.metrics import roc_curve
+
+    trials = fsr_trials(100, 12, polarity=polarity, slide=True)
+    X, y, seg = stack(trials)
+    det = FSRTouchSlip(threshold=0.0).fit(X, y, segments=seg)
+    pos, neg = [], []
+    for tr in trials:
+        assert tr.slide is not None
+        s, t = det.decision_function(tr.v[:, None]), tr.t
+        pos += [s[(t >= e) & (t < e + 0.01)].max() for e in tr.events]
+        held = s[(t >= 0.12) & (t < tr.slide[0])]
+        neg += [w.max() for w in np.array_split(held, max(1, len(held) // 20))]
+    units = np.maximum(np.r_[pos, neg], -1e300)
+    fpr, tpr, thr = roc_curve(np.r_[np.ones(len(pos)), np.zeros(len(neg))], units)
+    return float(thr[1:][np.argmax((tpr - fpr)[1:])])
+
+
+def fit_on_slides(polarity: str, **params: object) -> FSRTouchSlip:
+    """A detector with the event-ROC alpha of :func:`event_alpha` (same for both forms)."""
+    X, y, seg = stack(fsr_trials(100, 12, polarity=polarity, slide=True))
+    det = FSRTouchSlip(threshold=event_alpha(polarity), **params)  # type: ignore[arg-type]
+    return det.fit(X, y, segments=seg)
+
+
+def detection_rates(
+    det: FSRTouchSlip, slides: list[FSRTrial], bumped: list[FSRTrial]
+) -> dict[str, float]:
+    """Slides detected during the slide; bumps that fired within their span + 50 ms."""
+    hit = 0
+    for tr in slides:
+        assert tr.slide is not None
+        fired = det.predict(tr.v[:, None]).astype(bool)
+        hit += bool(fired[(tr.t >= tr.slide[0]) & (tr.t <= tr.slide[1])].any())
+    n_bumps = fired_bumps = 0
+    for tr in bumped:
+        fired = det.predict(tr.v[:, None]).astype(bool)
+        for a, z in tr.bumps:
+            n_bumps += 1
+            fired_bumps += bool(fired[(tr.t >= a) & (tr.t <= z + 0.05)].any())
+    return {
+        "slides": hit / len(slides),
+        "n_slides": len(slides),
+        "bumps_fired": fired_bumps / n_bumps if n_bumps else float("nan"),
+        "n_bumps": n_bumps,
+    }
+
+
+ROBUST = {"confirm_events": 2, "confirm_window_s": 0.3, "peak_gap_s": 0.01}
+
+
+# -- polarity -------------------------------------------------------------------------------
+@pytest.mark.parametrize("polarity", ["falling", "rising"])
+def test_fit_learns_the_wiring_polarity(polarity: str) -> None:
+    """polarity=auto learns falling / rising from the training presses."""
+    X, y, seg = stack(fsr_trials(1, 3, polarity=polarity, slide=True))
+    det = FSRTouchSlip().fit(X, y, segments=seg)
+    assert polarity == det.polarity_
+    assert {polarity: 3, "untouched": 0} == {
+        k: det.polarity_votes_[k] for k in (polarity, "untouched")
+    }
+
+
+@pytest.mark.parametrize("polarity", ["falling", "rising"])
+def test_either_polarity_detects_the_slides(polarity: str) -> None:
+    """The paper detector with a learned polarity finds >= 95 % of generated slides."""
+    det = fit_on_slides(polarity)
+    slides = fsr_trials(200, 20, polarity=polarity, slide=True)
+    rates = detection_rates(det, slides, [])  # type: ignore[arg-type]
+    assert rates["slides"] >= 0.95
+
+
+def test_training_data_without_a_touch_is_refused_with_a_fixed_threshold() -> None:
+    """A fixed threshold with polarity=auto and never-pressed data is an error naming the data."""
+    X = np.full((400, 1), 4.5) + np.random.default_rng(0).normal(0, 1e-3, (400, 1))
+    with pytest.raises(
+        SlipkitError, match=r"1 recording\(s\), 400 samples\) never shows"
+    ):
+        FSRTouchSlip(threshold=8.0).fit(X, np.zeros(400, int))
+
+
+def test_roc_fit_without_a_touch_is_refused_not_a_traceback() -> None:
+    """ROC calibration on never-pressed recordings is a SlipkitError, not an argmax crash."""
+    X = np.full((400, 1), 0.4)
+    y = np.r_[np.zeros(200, int), np.ones(200, int)]
+    with pytest.raises(SlipkitError, match="set polarity"):
+        FSRTouchSlip().fit(X, y, segments=np.repeat([0, 1], 200))
+
+
+def test_recordings_that_disagree_on_the_polarity_are_refused() -> None:
+    """One falling and one rising training recording: an error naming both."""
+    a = fsr_trials(3, 1, polarity="falling", slide=True)
+    b = fsr_trials(4, 1, polarity="rising", slide=True)
+    X, y, seg = stack(a + b)
+    with pytest.raises(SlipkitError, match=r"recordings \[0\] fall, \[1\] rise"):
+        FSRTouchSlip().fit(X, y, segments=seg)
+
+
+def test_force_input_refuses_a_calibration_of_the_other_wiring() -> None:
+    """input=force with the falling-wiring calibration on a rising recording is refused."""
+    X, y, seg = stack(fsr_trials(5, 2, polarity="rising", slide=True))
+    with pytest.raises(SlipkitError, match="falling force"):
+        FSRTouchSlip(input="force").fit(X, y, segments=seg)
+
+
+def test_unfitted_auto_polarity_names_what_is_needed() -> None:
+    """Asking an unfitted auto detector for its slip sign says fit or set polarity."""
+    with pytest.raises(SlipkitError, match="call fit, or set polarity"):
+        _ = FSRTouchSlip()._sign
+
+
+@pytest.mark.parametrize("polarity", ["falling", "rising"])
+@pytest.mark.parametrize("params", [{}, ROBUST], ids=["paper", "confirmed"])
+def test_batch_equals_streaming_for_either_polarity(
+    polarity: str, params: dict[str, object]
+) -> None:
+    """Batch scores equal the streaming replay for either wiring, paper and confirmed forms."""
+    det = fit_on_slides(polarity, **params)
+    for tr in fsr_trials(300, 2, polarity=polarity, slide=True) + fsr_trials(
+        301, 1, polarity=polarity, slide=False
+    ):
+        batch = det.decision_function(tr.v[:, None])
+        scores, dec = det.replay(tr.v[:, None])
+        np.testing.assert_array_equal(batch, scores)
+        assert (batch >= det.threshold_).tolist() == dec.tolist()
+
+
+@pytest.mark.parametrize("polarity", ["falling", "rising"])
+def test_onnx_graph_agrees_for_either_polarity(polarity: str) -> None:
+    """The exported FSR graph (rest from fit) passes parity on generated recordings."""
+    from slipkit.export.detectors import check_detector_parity, export_fsr_touch_slip
+
+    det = fit_on_slides(polarity)
+    X, _, seg = stack(fsr_trials(400, 3, polarity=polarity, slide=True))
+    graph = export_fsr_touch_slip(det)
+    report = check_detector_parity(det, graph, X, segments=seg)
+    assert polarity == graph.features["polarity"]
+    assert (True, 0) == (report["passed"], report["n_finite_mismatch"])
+
+
+def test_confirmed_variant_does_not_export() -> None:
+    """The confirmed variant has no graph yet: a clear ExportError, not a wrong graph."""
+    from slipkit.export.detectors import export_fsr_touch_slip
+    from slipkit.export.registry import ExportError
+
+    det = fit_on_slides("falling", **ROBUST)
+    with pytest.raises(ExportError, match="confirm_events=2"):
+        export_fsr_touch_slip(det)
+
+
+# -- sharp bumps ------------------------------------------------------------------------------
+@pytest.mark.parametrize("polarity", ["falling", "rising"])
+def test_confirmed_detector_holds_against_sharp_bumps(polarity: str) -> None:
+    """Confirmed variant: >= 95 % of slides, <= 10 % of sharp bumps fire; the paper's fires more."""
+    slides = fsr_trials(200, 20, polarity=polarity, slide=True)
+    bumped = fsr_trials(500, 20, polarity=polarity, slide=False)
+    robust = detection_rates(fit_on_slides(polarity, **ROBUST), slides, bumped)
+    paper = detection_rates(fit_on_slides(polarity), slides, bumped)
+    assert robust["slides"] >= 0.95
+    assert robust["bumps_fired"] <= 0.10
+    assert paper["bumps_fired"] > robust["bumps_fired"]
+
+
+def test_one_bump_is_one_event_two_events_confirm() -> None:
+    """One sharp release is one peak (no score); a second within the window confirms it."""
+    v = np.full(800, 4.5)
+    v[40:] = 2.5
+    v[300:305] += 0.3  # a one-block release: a bump's edge
+    det = FSRTouchSlip(threshold=10.0, **ROBUST).fit(v[:, None], np.zeros(800, int))
+    assert 0 == int(det.predict(v[:, None]).sum())
+    v2 = v.copy()
+    v2[500:505] += 0.3  # a second release 0.1 s later
+    fired = det.predict(v2[:, None])
+    assert (0, 1) == (int(fired[:500].max()), int(fired[510:].max()))
+
+
+def main() -> None:
+    """Print the slide / bump table quoted in docs/baselines/fsr.md."""
+    print(
+        "FSR on generated signals (tests/baselines/test_conventions.py): 20 slides "
+        "(seed 200), 20 bump trials (seed 500), alpha from the event ROC of 12 "
+        "training slides (seed 100)"
+    )
+    print(
+        f"{'polarity':9s} {'detector':24s} {'alpha':>8s} {'slides':>14s} {'bumps fired':>16s}"
+    )
+    for polarity in ("falling", "rising"):
+        slides = fsr_trials(200, 20, polarity=polarity, slide=True)
+        bumped = fsr_trials(500, 20, polarity=polarity, slide=False)
+        for name, params in (("paper (fsr)", {}), ("confirmed (fsr_robust)", ROBUST)):
+            det = fit_on_slides(polarity, **params)
+            r = detection_rates(det, slides, bumped)
+            print(
+                f"{polarity:9s} {name:24s} {det.threshold_:8.2f} "
+                f"{r['slides']:7.0%} of {r['n_slides']:3d} "
+                f"{r['bumps_fired']:7.0%} of {r['n_bumps']:3d}"
+            )
+
+
+if __name__ == "__main__":
+    main()
