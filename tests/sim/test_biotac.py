@@ -532,6 +532,24 @@ def test_cli_simulate_writes_a_loadable_dataset(name: str, tmp_path: Any) -> Non
     assert ELECTRODE_NAMES == ds.streams["electrodes"].channels
 
 
+def test_channel_offset_shifts_each_electrode_by_a_constant_per_trial() -> None:
+    """channel_offset adds one constant per electrode and trial, of s.d. sigma, different across trials."""
+    model = BioTacForceProbe(duration_s=5.0)
+    bare = Scene("b", model, {})
+    shifted = Scene(
+        "b", model, {"channel_offset": {"target": "electrodes", "sigma": 50.0}}
+    )
+    offsets = []
+    for i in range(3):
+        a = bare.run_trial(i, 0).streams["electrodes"].drop(columns="t").to_numpy()
+        b = shifted.run_trial(i, 0).streams["electrodes"].drop(columns="t").to_numpy()
+        diff = b - a
+        np.testing.assert_allclose(diff, np.broadcast_to(diff[0], diff.shape))
+        offsets.append(diff[0])
+    assert 50.0 == pytest.approx(float(np.std(offsets)), rel=0.3)
+    assert not np.allclose(offsets[0], offsets[1])
+
+
 def test_pdc_rises_with_the_normal_load() -> None:
     """DC pressure = baseline + gain x (force along the contact normal)."""
     model = BioTacForceProbe(duration_s=5.0)

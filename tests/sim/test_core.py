@@ -18,6 +18,17 @@ from slipkit.sim import (
     phase_times,
     sample_times,
 )
+from slipkit.sim.core import EFFECT_DRAWS, draw_effect_params
+
+#: Effects added for issue 14 (hard variants); the spy test checks they exist too.
+NEW_EFFECTS = {
+    "mindlin_creep",
+    "missing_pin_frames",
+    "fsr_polarity",
+    "fsr_impulse_disturbance",
+    "channel_offset",
+    "nib_harmonics",
+}
 
 
 class Ramp:
@@ -76,8 +87,11 @@ def test_unnamed_effects_are_never_called(monkeypatch: pytest.MonkeyPatch) -> No
             return _real(state, rng, **kw)
 
         monkeypatch.setitem(EFFECTS, name, spy)
-    scene = Scene("ramp", Ramp(), {"white_noise": {"target": "sig", "sigma": 0.1}})
+    scene = Scene(
+        "ramp", Ramp(), {"white_noise": {"target": "sig", "sigma": [0.1, 0.2]}}
+    )
     scene.simulate(3, seed=0)
+    assert NEW_EFFECTS == NEW_EFFECTS & set(EFFECTS)
     assert ["white_noise"] * 3 == called
 
 
@@ -168,3 +182,115 @@ def test_an_effect_can_run_twice_under_suffixed_keys() -> None:
     }
     table = Scene("ramp", Ramp(), effects).simulate(4, seed=0).stream("sig")
     assert pytest.approx(0.5, rel=0.15) == float(np.std(table["v"] - table["t"]))
+
+
+# -- per-trial draws of effect parameters ----------------------------------------------
+
+
+def test_a_range_is_drawn_per_trial_and_recorded_in_the_metadata() -> None:
+    """`sigma: [lo, hi]` gives each trial its own noise level, inside the range, in its metadata."""
+    scene = Scene(
+        "ramp", Ramp(), {"white_noise": {"target": "sig", "sigma": [0.05, 0.5]}}
+    )
+    ds = scene.simulate(6, seed=0)
+    drawn = ds.trials["white_noise.sigma"].to_numpy()
+    assert (drawn >= 0.05).all()
+    assert (drawn <= 0.5).all()
+    assert 6 == len(np.unique(drawn))
+    for trial, sigma in zip(ds, drawn, strict=True):
+        table = trial.streams["sig"]
+        measured = float(np.std(table["v"] - table["t"]))
+        assert pytest.approx(sigma, rel=0.3) == measured
+
+
+def test_scalars_draw_nothing_and_fixed_ranges_equal_scalars() -> None:
+    """A scalar parameter consumes no random numbers: `[v, v]` gives the scalar's exact signal."""
+    fixed = {"white_noise": {"target": "sig", "sigma": 0.1}}
+    same = {"white_noise": {"target": "sig", "sigma": [0.1, 0.1]}}
+    a = Scene("ramp", Ramp(), fixed).simulate(3, seed=2)
+    b = Scene("ramp", Ramp(), same).simulate(3, seed=2)
+    pd.testing.assert_frame_equal(a.stream("sig"), b.stream("sig"))
+    assert "white_noise.sigma" not in a.trials.columns
+    assert [0.1, 0.1, 0.1] == b.trials["white_noise.sigma"].tolist()
+    kwargs, drawn = draw_effect_params(
+        "white_noise", {"sigma": 0.3}, rng := np.random.default_rng(0)
+    )
+    assert ({"sigma": 0.3}, {}) == (kwargs, drawn)
+    assert np.random.default_rng(0).random() == rng.random()
+
+
+def test_log_uniform_and_uniform_draws_have_their_medians() -> None:
+    """Log-uniform draws centre on the geometric mean, uniform ones on the arithmetic mean."""
+    rng = np.random.default_rng(1)
+    log = [
+        draw_effect_params("white_noise", {"sigma": [1e-3, 1e-1]}, rng)[0]["sigma"]
+        for _ in range(2000)
+    ]
+    uni = [
+        draw_effect_params("drift", {"rate_per_s": [0.0, 2.0]}, rng)[0]["rate_per_s"]
+        for _ in range(2000)
+    ]
+    assert "log" == EFFECT_DRAWS["white_noise"]["sigma"]
+    assert pytest.approx(1e-2, rel=0.15) == float(np.median(log))
+    assert pytest.approx(1.0, rel=0.1) == float(np.median(uni))
+
+
+def test_choice_draws_each_option_and_undeclared_lists_pass_through() -> None:
+    """A choice list yields its options; a pair the effect does not declare (full_scale) is kept."""
+    rng = np.random.default_rng(3)
+    picks = {
+        draw_effect_params("fsr_polarity", {"polarity": ["falling", "rising"]}, rng)[0][
+            "polarity"
+        ]
+        for _ in range(50)
+    }
+    assert {"falling", "rising"} == picks
+    kwargs, drawn = draw_effect_params(
+        "quantisation@x", {"bits": 4, "full_scale": [0.0, 1.5]}, rng
+    )
+    assert ({"bits": 4, "full_scale": [0.0, 1.5]}, {}) == (kwargs, drawn)
+
+
+@pytest.mark.parametrize(
+    ("value", "match"),
+    [
+        ([0.5, 0.1], r"scene\.effects\.white_noise@a\.sigma: expected finite lo <= hi"),
+        (
+            [0.0, 0.1],
+            r"scene\.effects\.white_noise@a\.sigma: a log-uniform range needs lo > 0",
+        ),
+        (
+            [0.1, "x"],
+            r"scene\.effects\.white_noise@a\.sigma: expected a number or \[lo, hi\]",
+        ),
+        (
+            [0.1, 0.2, 0.3],
+            r"scene\.effects\.white_noise@a\.sigma: expected a number or \[lo, hi\]",
+        ),
+    ],
+)
+def test_bad_ranges_name_the_field(value: list, match: str) -> None:
+    """A range that cannot be drawn raises a SimulationError naming scene.effects.<key>.<param>."""
+    scene = Scene("ramp", Ramp(), {"white_noise@a": {"target": "sig", "sigma": value}})
+    with pytest.raises(SimulationError, match=match):
+        scene.simulate(1, seed=0)
+
+
+def test_order_sets_the_evaluation_order_and_must_list_every_effect() -> None:
+    """`order` runs effects in its order (quantise last keeps the grid) and refuses a partial list."""
+    effects = {
+        "quantisation": {"target": "sig", "bits": 4, "full_scale": (0.0, 1.5)},
+        "white_noise": {"target": "sig", "sigma": 0.01},
+    }
+    v = (
+        Scene("ramp", Ramp(), effects, order=["white_noise", "quantisation"])
+        .simulate(1, seed=0)
+        .stream("sig")["v"]
+        .to_numpy()
+    )
+    lsb = 1.5 / 15
+    np.testing.assert_allclose(np.round(v / lsb) * lsb, v)
+    with pytest.raises(
+        SimulationError, match=r"scene.order must list each key.*\['quantisation'\]"
+    ):
+        Scene("ramp", Ramp(), effects, order=["white_noise"])

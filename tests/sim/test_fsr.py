@@ -206,6 +206,57 @@ def test_touch_step_only_with_the_touch_effect() -> None:
     )
 
 
+# -- polarity and sharp knocks (issue 14) -------------------------------------------------------
+def test_rising_polarity_mirrors_the_voltage_wherever_it_is_listed() -> None:
+    """fsr_polarity=rising reads lo + hi - V: rest at 0.5 V, the touch raises the voltage, in any order."""
+    fx = {"fsr_touch": {"rise_s": 0.01}, "fsr_slip_events": {}}
+    falling = Scene("f", FSRProbeSlide(), fx).run_trial(0, 4)
+    rising = Scene("f", FSRProbeSlide(), {**fx, "fsr_polarity": {"polarity": "rising"}})
+    first = Scene(
+        "f", FSRProbeSlide(), {"fsr_polarity": {"polarity": "rising"}, **fx}
+    ).run_trial(0, 4)
+    v_fall = falling.streams["fsr"]["voltage"].to_numpy()
+    v_rise = rising.run_trial(0, 4).streams["fsr"]["voltage"].to_numpy()
+    np.testing.assert_allclose(5.0 - v_fall, v_rise, atol=1e-12)
+    np.testing.assert_allclose(v_rise, first.streams["fsr"]["voltage"], atol=1e-12)
+    assert 0.5 == pytest.approx(float(v_rise[0]))
+    assert float(v_rise[1000]) > 1.5  # pressed (0.5 s): above rest
+    assert "rising" == first.meta["polarity"]
+
+
+def test_sharp_knocks_have_millisecond_edges_and_15_to_50_percent_amplitude() -> None:
+    """fsr_impulse_disturbance: both signs, |dF| 15-50 % of F, 5-50 ms long, and far steeper than bumps."""
+    knock = {
+        "count": [1, 3],
+        "amplitude_frac": [0.15, 0.5],
+        "rise_s": [0.001, 0.005],
+        "duration_s": [0.005, 0.05],
+    }
+    model = FSRProbeSlide(hold_s=1.0)
+    signs, steep, gentle = set(), [], []
+    for i in range(8):
+        for effects, out in (
+            ({"fsr_impulse_disturbance": knock}, steep),
+            ({"fsr_disturbance": {}}, gentle),
+        ):
+            trial = Scene("f", model, effects).run_trial(i, 5)
+            truth = trial.streams["truth_contact"]
+            fn = trial.labels["normal_force_N"]
+            dist = truth["disturbance"].to_numpy() == 1
+            rel = (truth["force"].to_numpy() - fn) / fn
+            slope = np.abs(np.diff(truth["force"].to_numpy()))[dist[1:]]
+            out.append(slope.max() * RATE / fn)
+            if "fsr_impulse_disturbance" not in effects:
+                continue
+            assert 0.15 - 1e-9 <= np.abs(rel[dist]).max() <= 0.5 + 1e-9
+            edges = np.flatnonzero(np.diff(np.r_[0, dist.astype(int), 0]))
+            lengths = np.diff(edges)[::2] / RATE
+            assert ((lengths >= 0.004) & (lengths <= 0.051)).all(), lengths
+            signs |= set(np.sign(rel[dist][np.abs(rel[dist]) > 0.1]).astype(int))
+    assert {-1, 1} == signs
+    assert min(steep) > 5.0 * max(gentle)  # relative slope, 1/s
+
+
 def test_force_effects_follow_dropped_frames() -> None:
     """A force effect after dropped_frames shifts the kept voltage samples by V(F_new) - V(F_old)."""
     model = build().model

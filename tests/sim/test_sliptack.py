@@ -435,3 +435,31 @@ def test_bad_drop_config_names_its_key() -> None:
         SlipTackDrop(
             hold_deflection_mm=2.45, slide_deflection_mm=[0.9, 2.4], friction=friction
         )
+
+
+# -- nib_harmonics (issue 14) ----------------------------------------------------------------
+def test_nib_harmonics_add_a_cycle_locked_second_harmonic() -> None:
+    """nib_harmonics adds ratio (2/pi) D sin(2 phi) at twice the stick-slip frequency, after the pull only."""
+    fx = {"stick_slip": {"M_kg": M, "k_l_N_m": K_L}}
+    model = SlipTackPull(
+        speed_mm_s=30.0,
+        materials=["cherry"],
+        friction={"cherry": {"mu_s": CHERRY[0], "mu_k": CHERRY[1]}},
+    )
+    plain = Scene("p", model, fx).run_trial(0, 1)
+    harm = {**fx, "nib_harmonics": {"ratio": 0.7, "phase_deg": 0.0}}
+    trial = Scene("p", model, harm).run_trial(0, 1)
+    t = trial.streams["nib"]["t"].to_numpy()
+    x0 = plain.streams["nib"]["deflection"].to_numpy()
+    extra = trial.streams["nib"]["deflection"].to_numpy() - x0
+    steady = t >= 0.7
+    f0 = dominant_hz(x0[steady], 1000.0)
+    assert 2.0 * f0 == pytest.approx(dominant_hz(extra[steady], 1000.0), rel=0.02)
+    rng = np.random.default_rng([1, 0])
+    state = stick_slip(model.base(model.sample(rng), rng), rng, M_kg=M, k_l_N_m=K_L)
+    cycles = state.truth["stick_slip_cycles"]
+    d_mm = 1e3 * float(np.median(np.abs(cycles.break_u - cycles.centre_u)))
+    assert 0.7 * 2.0 / np.pi * d_mm == pytest.approx(np.abs(extra).max(), rel=0.05)
+    assert 0.0 == np.abs(extra[t < cycles.break_s[0]]).max()
+    with pytest.raises(SimulationError, match="list it after 'stick_slip'"):
+        Scene("p", model, {"nib_harmonics": {"ratio": 0.5}}).run_trial(0, 1)

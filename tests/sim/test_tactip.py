@@ -39,6 +39,11 @@ def compose_scene(*overrides: str) -> Scene:
     return build_scene(cfg.scene)
 
 
+def _scene_cfg(name: str):
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        return compose(config_name="simulate", overrides=[f"scene={name}"]).scene
+
+
 def scene_with(effects: dict, **model: object) -> Scene:
     return Scene(SCENE, TacTipGravityDrop(**model), effects)  # type: ignore[arg-type]
 
@@ -302,6 +307,47 @@ def test_missing_pins_give_nan_pairs_only_when_listed():
     assert not clean.stream("pins").isna().to_numpy().any()
 
 
+def test_mindlin_creep_grows_from_the_contact_edge_before_onset_and_freezes_after():
+    """mindlin_creep moves edge pins down before onset while the centre pin sticks; it holds after onset."""
+    amp = 0.2
+    creep = scene_with({"mindlin_creep": {"amplitude_mm": amp}}, speed_mm_s=0.1)
+    trial = creep.run_trial(0, seed=5)
+    bare = scene_with({}, speed_mm_s=0.1).run_trial(0, seed=5)
+    t, x, y = pins_of(trial)
+    _, x0, y0 = pins_of(bare)
+    k = onset_frame(t, trial)
+    dy = y - y0
+    np.testing.assert_allclose(x0, x, atol=1e-12)  # gravity is straight down: no x creep
+    assert 0.0 == np.abs(dy[:k, 0]).max()  # the centre pin is in the stick zone
+    assert 0.0 > dy[k - 1].min() > -amp  # edge pins creep down, at most A
+    assert dy[k - 1].mean() < dy[k // 2].mean() <= 0.0  # the creep grows towards onset
+    np.testing.assert_allclose(dy[k:], np.broadcast_to(dy[k], dy[k:].shape))
+
+
+def test_missing_pin_frames_blank_one_to_five_pins_in_the_given_share_of_frames():
+    """missing_pin_frames blanks 1-5 pins (x and y together) in about p of the frames."""
+    fx = {"missing_pin_frames": {"frame_probability": 0.1, "count": [1, 5]}}
+    ds = Scene(SCENE, TacTipGravityDrop(), fx).simulate(4, seed=12)
+    x, y = split_pins(ds.stream("pins").drop(columns=["trial_id", "t"]).to_numpy())
+    np.testing.assert_array_equal(np.isnan(x), np.isnan(y))
+    per_frame = np.isnan(x).sum(axis=1)
+    hit = per_frame[per_frame > 0]
+    assert 0.1 == pytest.approx(len(hit) / len(per_frame), abs=0.03)
+    assert {1, 2, 3, 4, 5} == set(hit.tolist())
+    none = {"missing_pin_frames": {"frame_probability": 0.0, "count": [1, 5]}}
+    clean = Scene(SCENE, TacTipGravityDrop(), none).simulate(1, seed=12)
+    assert not clean.stream("pins").isna().to_numpy().any()
+
+
+def test_331_pin_variant_uses_ten_full_rings():
+    """The 331-pin hard variant lays out 10 hexagonal rings (331 = 1 + 3*10*11) at 60 FPS."""
+    scene = build_scene(_scene_cfg("tactip_gravity_drop_hard_331"))
+    trial = scene.run_trial(0, seed=0)
+    assert 331 == pins_in_rings(10)
+    assert 1 + 2 * 331 == trial.streams["pins"].shape[1]
+    assert pytest.approx(1 / 60.0) == float(np.diff(trial.streams["pins"]["t"])[0])
+
+
 # -- validation -------------------------------------------------------------------------------
 
 
@@ -328,6 +374,9 @@ def test_bad_effect_parameters_raise():
         {"snap_back": {"tau_s": 0.0}},
         {"missing_pins": {"probability": 2.0}},
         {"pin_jitter": {"sigma_mm": -1.0}},
+        {"mindlin_creep": {"amplitude_mm": -0.1}},
+        {"missing_pin_frames": {"frame_probability": 1.5}},
+        {"missing_pin_frames": {"frame_probability": 0.1, "count": [3, 1]}},
     ):
         with pytest.raises(SimulationError, match=next(iter(effects))):
             scene_with(effects).run_trial(0, seed=0)
