@@ -17,7 +17,7 @@ from typing import Any
 import pandas as pd
 
 from slipkit import __version__
-from slipkit._files import atomic_dir, sha256_file
+from slipkit._files import atomic_dir, recover_leftovers, sha256_file
 from slipkit.data.dataset import FORMAT, SCHEMA_VERSION, Dataset, LabelSpec, StreamSpec
 from slipkit.errors import DatasetError
 
@@ -57,7 +57,7 @@ def save_dataset(
     never half of either.
     """
     path = Path(path)
-    with atomic_dir(path, overwrite=overwrite) as tmp:
+    with atomic_dir(path, overwrite=overwrite, kind="dataset") as tmp:
         (tmp / "streams").mkdir()
         files: dict[str, str] = {}
         _write_parquet(dataset.trials, tmp / TRIALS)
@@ -179,6 +179,7 @@ def load_dataset(path: Path | str, *, verify: bool = True) -> Dataset:
         Naming the file and the field or column at fault, and what was expected.
     """
     path = Path(path)
+    recover_leftovers(path)  # an interrupted overwrite: restore or report it
     manifest = read_manifest(path)
     mpath = str(path / MANIFEST)
     files: Mapping[str, str] = manifest["files"]

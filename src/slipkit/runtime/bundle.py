@@ -47,7 +47,7 @@ from typing import Any
 import numpy as np
 import onnxruntime as ort
 
-from slipkit._files import atomic_dir, sha256_bytes, sha256_file
+from slipkit._files import atomic_dir, recover_leftovers, sha256_bytes, sha256_file
 from slipkit.runtime._schema import Fields
 from slipkit.runtime.errors import BundleError
 from slipkit.runtime.preprocessing import Pipeline
@@ -555,6 +555,7 @@ def load_bundle(path: str | Path, *, session: SessionSpec | None = None) -> Bund
         Naming the file and, for manifest problems, the field.
     """
     root = Path(path)
+    recover_leftovers(root)  # an interrupted overwrite: restore or report it
     manifest_path = root / MANIFEST_FILE
     mfile = str(manifest_path)
     if not root.is_dir():
@@ -648,7 +649,8 @@ def write_bundle(
         Recorded frames ``(n, *frame.shape)`` and their times ``(n,)`` in s, written
         as ``replay.npz`` for ``slipkit-run <bundle>`` and session tuning.
     overwrite : bool
-        Replace an existing bundle folder.
+        Replace an existing bundle folder (only a bundle: any other folder or file
+        under ``out`` is refused, as is an ``out`` inside a slipkit folder).
 
     Returns
     -------
@@ -682,7 +684,7 @@ def write_bundle(
             mfile, None, f"cannot be written as strict JSON: {exc}"
         ) from None
     checked = validate_manifest(man, mfile)
-    with atomic_dir(target, overwrite=overwrite) as tmp:
+    with atomic_dir(target, overwrite=overwrite, kind="bundle") as tmp:
         (tmp / MODEL_FILE).write_bytes(model)
         if replay is not None:
             frames, times = check_replay_arrays(

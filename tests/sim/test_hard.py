@@ -1,0 +1,175 @@
+"""Hard scene variants (issue 14): compose their base, draw their ranges, reproduce, are harder."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hydra import compose, initialize_config_dir
+from omegaconf import DictConfig, OmegaConf
+from sklearn.metrics import balanced_accuracy_score
+
+from slipkit import config_dir
+from slipkit.data import Dataset
+from slipkit.data.io import save_dataset
+from slipkit.features.tactip import dataset_features
+from slipkit.models.svm import TacTipSVM
+from slipkit.physics.tactip import split_pins
+from slipkit.sim import Scene
+from slipkit.sim.commands import build_scene
+from slipkit.sim.core import EFFECT_DRAWS, effect_name
+
+SCENES = config_dir() / "scene"
+BASES = sorted(p.stem for p in SCENES.glob("*.yaml") if "defaults" not in p.read_text())
+VARIANTS = sorted(p.stem for p in SCENES.glob("*.yaml") if p.stem not in BASES)
+
+
+def scene_cfg(name: str) -> DictConfig:
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        return compose(config_name="simulate", overrides=[f"scene={name}"]).scene
+
+
+def build(name: str) -> Scene:
+    return build_scene(scene_cfg(name))
+
+
+def base_of(name: str) -> str:
+    return next(b for b in sorted(BASES, key=len, reverse=True) if name.startswith(b))
+
+
+def test_every_base_scene_has_a_hard_variant() -> None:
+    """Each base scene config has a <scene>_hard.yaml next to it."""
+    assert {f"{b}_hard" for b in BASES} <= set(VARIANTS)
+
+
+@pytest.mark.parametrize("name", VARIANTS)
+def test_variant_keeps_its_base_model_and_every_base_effect(name: str) -> None:
+    """A variant builds its base's model class and runs a superset of its base's effects."""
+    base, variant = build(base_of(name)), build(name)
+    assert type(base.model) is type(variant.model)
+    assert set(base.effects) <= set(variant.effects)
+    assert name == variant.name
+
+
+@pytest.mark.parametrize("name", VARIANTS)
+def test_drawn_parameters_lie_in_their_ranges(name: str) -> None:
+    """Each declared [lo, hi] of a variant is drawn per trial inside it, in the trials table (hard ones have some)."""
+    cfg = scene_cfg(name)
+    effects = OmegaConf.to_container(cfg.effects, resolve=True)
+    assert isinstance(effects, dict)
+    ds = build(name).simulate(3, seed=0)
+    ranged = 0
+    for key, params in effects.items():
+        for param, kind in EFFECT_DRAWS[effect_name(key)].items():
+            value = (params or {}).get(param)
+            if not isinstance(value, list):
+                continue
+            ranged += 1
+            drawn = ds.trials[f"{key}.{param}"]
+            if kind == "choice":
+                assert set(drawn) <= set(value)
+            else:
+                assert drawn.between(value[0], value[1]).all()
+    assert ("_hard" in name) == (ranged >= 1)
+
+
+def files_of(folder: Path) -> dict[str, bytes]:
+    return {
+        str(p.relative_to(folder)): p.read_bytes()
+        for p in sorted(folder.rglob("*"))
+        if p.is_file()
+    }
+
+
+@pytest.mark.parametrize("name", VARIANTS)
+def test_same_seed_gives_the_same_bytes(name: str, tmp_path: Path) -> None:
+    """A variant simulated twice with one seed writes identical files; another seed changes the streams."""
+    scene = build(name)
+    a = files_of(save_dataset(scene.simulate(2, seed=3), tmp_path / "a"))
+    b = files_of(save_dataset(scene.simulate(2, seed=3), tmp_path / "b"))
+    c = files_of(save_dataset(scene.simulate(2, seed=4), tmp_path / "c"))
+    assert a == b
+    streams = [f for f in a if f.startswith("streams") or f.endswith(".parquet")]
+    assert streams
+    assert any(a[f] != c[f] for f in streams)
+
+
+def test_base_scenes_record_no_drawn_parameters() -> None:
+    """The base configs give every effect parameter as a scalar: no per-trial draw columns."""
+    for name in BASES:
+        ds = build(name).simulate(1, seed=0)
+        assert [] == [c for c in ds.trials.columns if "." in c]
+
+
+# -- a model trained on one variant, scored on the other ------------------------------------
+
+
+def _tactip(name: str, seed: int, n: int = 10) -> Dataset:
+    return build(name).simulate(n, seed=seed)
+
+
+def onset_snr(ds: Dataset) -> float:
+    """Median over trials of (peak mean pin speed within 2 frames of onset) / (median pre-onset speed)."""
+    out = []
+    for trial in ds:
+        p = trial.streams["pins"]
+        t = p["t"].to_numpy()
+        x, y = split_pins(p.drop(columns="t").to_numpy())
+        speed = np.nanmean(np.hypot(np.diff(x, axis=0), np.diff(y, axis=0)), axis=1)
+        k = int(np.searchsorted(t, trial.labels["slip_onset_s"])) - 1
+        out.append(speed[k - 2 : k + 3].max() / np.median(speed[: k - 10]))
+    return float(np.median(out))
+
+
+def test_tactip_hard_is_harder_and_a_hard_trained_svm_transfers_to_base() -> None:
+    """Base-trained SVM loses slip recall on hard (lower SNR); a hard-trained one keeps >= 0.85 on base."""
+    names = ("tactip_gravity_drop", "tactip_gravity_drop_hard")
+    train = {n: dataset_features(_tactip(n, seed=0)) for n in names}
+    test_sets = {n: _tactip(n, seed=1) for n in names}
+    test = {n: dataset_features(ds) for n, ds in test_sets.items()}
+    base, hard = names
+    scores = {}
+    for fit_on in names:
+        model = TacTipSVM().fit(train[fit_on].X, train[fit_on].y)
+        for score_on in names:
+            y, pred = test[score_on].y, model.predict(test[score_on].X)
+            slip = y == "slip"
+            scores[fit_on, score_on] = (
+                balanced_accuracy_score(y, pred),
+                float(np.mean(pred[slip] == "slip")),
+            )
+    assert onset_snr(test_sets[hard]) < 0.5 * onset_snr(test_sets[base])
+    assert scores[base, hard][1] < scores[base, base][1] - 0.2
+    assert scores[base, hard][0] < scores[base, base][0] - 0.1
+    assert scores[hard, base][0] >= 0.85
+
+
+def _fsr_blocks(trial) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Stage-2 block derivative (V/s, 5-sample means), slip-event flag and time (s) per block."""
+    v = trial.streams["fsr"]["voltage"].to_numpy()
+    n = len(v) // 5 * 5
+    deriv = np.diff(v[:n].reshape(-1, 5).mean(axis=1)) * 2000.0 / 5
+    ev = trial.streams["truth_contact"]["slip_event"].to_numpy()[:n]
+    flag = ev.reshape(-1, 5).max(axis=1)[1:] > 0
+    return deriv, flag, np.arange(1, len(deriv) + 1) * 5 / 2000.0
+
+
+def test_fsr_hard_knocks_trip_a_threshold_fitted_on_the_base_scene() -> None:
+    """A dV/dt threshold set on base slip spikes never fires in a base hold but does in hard holds."""
+    peaks = []
+    for trial in build("fsr_probe_slide").simulate(6, seed=0):
+        deriv, flag, _ = _fsr_blocks(trial)
+        for o in np.flatnonzero(np.diff(np.r_[0, flag.astype(int)]) > 0):
+            peaks.append(deriv[max(0, o - 1) : o + 3].max())
+    threshold = 0.5 * float(np.percentile(peaks, 10))
+    alarms = {}
+    for name in ("fsr_probe_slide", "fsr_probe_slide_hard"):
+        fired = []
+        for trial in build(name).simulate(6, seed=1):
+            deriv, _, tb = _fsr_blocks(trial)
+            hold = (tb > 0.1) & (tb < trial.labels["slip_onset_s"])
+            fired.append(bool((deriv[hold] > threshold).any()))
+        alarms[name] = float(np.mean(fired))
+    assert 0.0 == alarms["fsr_probe_slide"]
+    assert alarms["fsr_probe_slide_hard"] >= 0.8
