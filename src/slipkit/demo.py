@@ -30,7 +30,7 @@ from hydra import compose
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from slipkit._files import atomic_dir, atomic_write_text
+from slipkit._files import atomic_dir, atomic_write_text, check_out_path
 from slipkit.data.io import load_dataset, save_dataset
 from slipkit.sim.commands import build_scene
 
@@ -66,7 +66,6 @@ def demo_main(cfg: DictConfig) -> Path:
 
     start = time.perf_counter()
     out = Path(str(cfg.out))
-    out.mkdir(parents=True, exist_ok=True)
     show = bool(cfg.get("progress", True))
     root = Path(str(cfg.data_root))
     present = {
@@ -74,6 +73,14 @@ def demo_main(cfg: DictConfig) -> Path:
         for src, sub in cfg.real.items()
         if (root / str(sub)).exists()
     }
+    # Only an earlier demo's output is rewritten; never the recordings it reads.
+    check_out_path(
+        out,
+        inputs={f"real.{src}": path for src, path in present.items()},
+        kind="demo",
+        overwrite=bool(cfg.overwrite),
+    )
+    out.mkdir(parents=True, exist_ok=True)
     plan = _plan(cfg, present)
     datasets: list[dict[str, Any]] = []
 
@@ -145,7 +152,9 @@ def demo_main(cfg: DictConfig) -> Path:
         unit="family",
         disable=not show,
     ):
-        with atomic_dir(out / "compare" / family, overwrite=True) as tmp:
+        with atomic_dir(
+            out / "compare" / family, overwrite=True, kind="comparison"
+        ) as tmp:
             results[family] = run_comparison(ccfg, tmp, progress=False)
         results[family].folder = out / "compare" / family
         results[family].report = results[family].folder / "report.md"

@@ -30,7 +30,7 @@ import pandas as pd
 from hydra.utils import get_class
 from omegaconf import DictConfig, OmegaConf
 
-from slipkit._files import atomic_dir
+from slipkit._files import atomic_dir, check_out_path
 from slipkit.compare import plots
 from slipkit.compare.adapters import Evaluation, RunView, adapt
 from slipkit.compare.costs import DeployCost, FitTimer, deploy_cost, quiet_console
@@ -293,7 +293,19 @@ def compare_main(cfg: DictConfig) -> Path:
         if cfg.get("out")
         else new_run_dir(Path(str(cfg.runs_dir)), str(cfg.name))
     )
-    with atomic_dir(target, overwrite=bool(cfg.get("overwrite", False))) as tmp:
+    overwrite = bool(cfg.get("overwrite", False))
+    data = cfg.comparison.get("dataset") or {}
+    check_out_path(
+        target,
+        inputs={
+            "comparison.dataset.path": data.get("path"),
+            "comparison.dataset.raw": data.get("raw"),
+        },
+        option="out" if cfg.get("out") else "runs_dir",
+        kind="comparison",
+        overwrite=overwrite,
+    )
+    with atomic_dir(target, overwrite=overwrite, kind="comparison") as tmp:
         result = run_comparison(cfg, tmp, progress=bool(cfg.get("progress", True)))
     cols = ["estimator", "kind", "score", "p50_us", "p99_us", "export"]
     print(result.table[cols].to_string(index=False))

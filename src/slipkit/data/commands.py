@@ -10,6 +10,7 @@ from typing import Any
 from hydra.utils import instantiate
 from omegaconf import DictConfig
 
+from slipkit._files import check_out_path
 from slipkit.data.dataset import Dataset
 from slipkit.data.io import load_dataset, save_dataset
 from slipkit.data.summary import summarize, summary_dict
@@ -22,8 +23,14 @@ def import_main(cfg: DictConfig) -> Path:
     src = Path(str(cfg.path))
     if not src.exists():
         raise SourceFormatError(f"{src}: no such file or folder (path=...)")
+    out = check_out_path(
+        str(cfg.out),
+        inputs={"path": src},
+        kind="dataset",
+        overwrite=bool(cfg.overwrite),
+    )
     dataset = reader(src)
-    out = save_dataset(dataset, Path(str(cfg.out)), overwrite=bool(cfg.overwrite))
+    out = save_dataset(dataset, out, overwrite=bool(cfg.overwrite))
     print(summarize(load_dataset(out)))
     print(out)
     return out

@@ -28,6 +28,7 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 import slipkit
+from slipkit._files import check_out_path
 from slipkit.errors import SlipkitError
 
 log = logging.getLogger("slipkit.export")
@@ -154,8 +155,16 @@ def export_main(cfg: DictConfig) -> Path:
         if cfg.get("out")
         else Path(str(cfg.get("exports_dir", "exports"))) / run.path.name
     )
-    if out.exists() and not bool(cfg.get("overwrite", False)):
-        raise SlipkitError(f"{out} already exists (overwrite=true to replace it)")
+    # Before any work: an existing bundle only is replaced, never the run or its data.
+    check_out_path(
+        out,
+        inputs={
+            "run": run.path,
+            "dataset.path": (run.config.get("dataset") or {}).get("path"),
+        },
+        kind="bundle",
+        overwrite=bool(cfg.get("overwrite", False)),
+    )
     name = str(cfg.get("name") or out.name)
     task = build(run.config.task, "task")
     dataset = training_dataset(run.config)

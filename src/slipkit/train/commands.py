@@ -25,7 +25,7 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig
 
 import slipkit
-from slipkit._files import atomic_dir
+from slipkit._files import atomic_dir, check_out_path, child_folder
 from slipkit.data.io import load_dataset
 from slipkit.errors import SlipkitError
 from slipkit.train.data import training_dataset
@@ -96,7 +96,18 @@ def train_main(cfg: DictConfig) -> float:
         if cfg.get("run_dir")
         else new_run_dir(Path(str(cfg.runs_dir)), str(cfg.name), job=_job_num())
     )
-    with atomic_dir(target, overwrite=bool(cfg.get("overwrite", False))) as tmp:
+    overwrite = bool(cfg.get("overwrite", False))
+    check_out_path(
+        target,
+        inputs={
+            "dataset.path": cfg.dataset.get("path"),
+            "dataset.raw": cfg.dataset.get("raw"),
+        },
+        option="run_dir" if cfg.get("run_dir") else "runs_dir",
+        kind="run",
+        overwrite=overwrite,
+    )
+    with atomic_dir(target, overwrite=overwrite, kind="run") as tmp:
         handler = _log_to(tmp / "train.log")
         try:
             start = time.perf_counter()
@@ -181,11 +192,21 @@ def evaluate_main(cfg: DictConfig) -> Path:
     fingerprint = dataset.fingerprint()
     name = (
         str(cfg.name)
-        if cfg.get("name")
-        else f"{Path(str(cfg.dataset)).name}-{fingerprint[:8]}"
+        if cfg.get("name") is not None
+        else f"{Path(str(cfg.dataset)).resolve().name.lstrip('.')}-{fingerprint[:8]}"
     )
-    target = run.path / "evaluations" / name
-    with atomic_dir(target, overwrite=True) as tmp:
+    # A plain name under <run>/evaluations/ only; an existing folder there is replaced
+    # only when it is an evaluation (re-evaluating under the same name).
+    target = child_folder(run.path / "evaluations", name, option="name")
+    check_out_path(
+        target,
+        inputs={"dataset": cfg.dataset},
+        option="name",
+        kind="evaluation",
+        overwrite=True,
+        inside=run.path,
+    )
+    with atomic_dir(target, overwrite=True, kind="evaluation", inside=run.path) as tmp:
         metrics = task.evaluate(run.model, dataset, out=tmp)
         payload = {
             "run": str(run.path),

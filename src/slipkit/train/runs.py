@@ -26,7 +26,7 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
-from slipkit._files import atomic_write_text, sha256_file
+from slipkit._files import atomic_write_text, recover_leftovers, sha256_file
 from slipkit.errors import SlipkitError
 
 RUN_FORMAT = "slipkit-run"
@@ -92,6 +92,7 @@ def read_run(path: Path | str) -> Run:
     import joblib
 
     folder = Path(path)
+    recover_leftovers(folder)  # an interrupted overwrite: restore or report it
     if not folder.is_dir():
         raise SlipkitError(f"{folder}: no such run folder (run=...)")
     info_path = folder / "run.json"
