@@ -21,6 +21,7 @@ from slipkit.baselines.sliptack import (
     speed_from_frequency,
 )
 from slipkit.data import Dataset
+from slipkit.errors import SlipkitError
 from slipkit.physics.stick_slip import (
     ConstantSpeedMotion,
     cycles_constant_speed,
@@ -224,12 +225,26 @@ def test_calibration_recovers_the_stick_length() -> None:
     assert good.stick_length_m_ == pytest.approx(cal.stick_length_m_, rel=0.05)
 
 
-def test_window_longer_than_the_recording_is_all_nan() -> None:
-    """A recording shorter than the window never gets an estimate (NaN, both forms)."""
+def test_window_longer_than_the_recording_is_an_error_naming_both() -> None:
+    """A recording shorter than the window is a SlipkitError naming both lengths (the stream warms up: NaN)."""
     x = np.sin(np.arange(100) / 5.0)[:, None]
     est = speed_estimator().fit(x, np.full(100, 10.0))
-    assert np.isnan(est.predict(x)).all()
+    with pytest.raises(
+        SlipkitError,
+        match=r"window 500 samples \(0.5 s at 1000 Hz\) is longer than "
+        r"the recording \(100 samples, 0.1 s\)",
+    ):
+        est.predict(x)
     assert all(np.isnan(est.stream().update(s)[1]) for s in x)
+
+
+def test_short_segment_is_named() -> None:
+    """With segments, the short recording is named by its index."""
+    x = np.sin(np.arange(700) / 5.0)[:, None]
+    seg = np.r_[np.zeros(600, int), np.ones(100, int)]
+    est = speed_estimator().fit(x[:600], np.full(600, 10.0))
+    with pytest.raises(SlipkitError, match=r"recording 1 \(0-based\) \(100 samples"):
+        est.frequency(x, segments=seg)
 
 
 def test_speed_segments_restart_the_window() -> None:
@@ -244,7 +259,7 @@ def test_speed_segments_restart_the_window() -> None:
 
 def test_speed_needs_one_channel() -> None:
     """Two channels are refused with a message naming the nib signal."""
-    with pytest.raises(ValueError, match="1 channel"):
+    with pytest.raises(ValueError, match=r"1 channel\(s\) \(the nib signal"):
         speed_estimator().fit(np.zeros((10, 2)), np.zeros(10))
 
 

@@ -22,6 +22,7 @@ from slipkit.baselines.sliptack import (
     TorsionalSlipDetector,
     dominant_frequency,
 )
+from slipkit.errors import SlipkitError
 
 RATE = 1000.0
 #: Relative round-off a flat signal may leave in a band-pass score (of |level|).
@@ -129,7 +130,8 @@ def test_one_sample_acceleration_and_speed_are_warm_up_nan(feature: str) -> None
     assert math.isnan(float(acc.predict(one)[0]))
     assert math.isnan(acc.stream().update(one[0]))
     speed = StickSlipSpeed().fit(x, np.full(3000, 10.0))
-    assert math.isnan(float(speed.predict(one)[0]))
+    with pytest.raises(SlipkitError, match="window 1000 samples"):
+        speed.predict(one)  # a recording shorter than the window: an error, not NaN
     assert math.isnan(speed.stream().update(one[0])[1])
 
 

@@ -30,6 +30,7 @@ saturation, a NaN sample in the window) is NaN, never ``inf`` and never an excep
 from __future__ import annotations
 
 import math
+import warnings
 from collections import deque
 from collections.abc import Sequence
 from numbers import Integral, Real
@@ -47,6 +48,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from slipkit.baselines.base import DetectorStream, StreamDetector, segment_bounds
+from slipkit.errors import SlipkitError
 from slipkit.physics.stick_slip import (
     natural_frequency,
     saturation_frequency,
@@ -58,6 +60,15 @@ Form = Literal["exact", "paper"]
 
 #: The paper's f_max range for eq. 7 (Hz).
 PAPER_F_MAX = (15.0, 40.0)
+
+#: d ln(speed) / d ln(normal force) of eq. 3 inverted, both forms: the speed is the
+#: stick length (proportional to Fn) times a function of the frequency alone, so a
+#: normal force x % off gives a speed x % off.
+SPEED_PER_FORCE = 1.0
+
+
+class FixedNormalForceWarning(UserWarning):
+    """The speed uses one fixed normal force; its relative error passes 1:1 to the speed."""
 
 
 # -- eqs. 6-7: dominant frequency of one window ------------------------------------------
@@ -81,6 +92,9 @@ def dominant_frequency(
     f_max_step: float = 1.0,
     pad_factor: int = 1,
     min_peak_ratio: float = 0.0,
+    harmonics: str = "keep",
+    harmonic_tol: float = 0.03,
+    interpolate: bool = False,
 ) -> float:
     """Dominant stick-slip frequency ``f_d`` of one signal window (Hz), eqs. 6-7.
 
@@ -105,6 +119,20 @@ def dominant_frequency(
         Peaks below this fraction of the largest spectral magnitude (DC excluded) are
         not counted (0: every local maximum, the paper's text). A slipkit addition: on a
         clean stick-slip signal the paper's top-10 average is dominated by noise peaks.
+    harmonics : {"keep", "fundamental"}
+        ``"fundamental"`` drops a counted peak at about ``m`` times (m >= 2) a lower
+        counted peak: the stick-slip waveform's harmonics (a sawtooth's 2nd is ~0.5 of
+        the fundamental, and can pass ``min_peak_ratio``) would otherwise be averaged
+        in. ``"keep"``: the paper (every peak counts). A slipkit addition.
+    harmonic_tol : float
+        A peak in bin ``k_j`` is the ``m``-th harmonic of bin ``k_i`` when
+        ``|k_j - m k_i| <= max(1, harmonic_tol m k_i)`` (bins, so batch and graph agree).
+    interpolate : bool
+        Refine each counted peak's frequency between bins by the parabola through the
+        log magnitudes of its bin and its two neighbours (offset clipped to +-0.5 bin;
+        none where a neighbour is 0). The ranking and the ``f_max`` limits still use
+        the bin frequency. A slipkit addition: the DFT bin (``rate_hz / (n
+        pad_factor)``, 1 Hz for 1000 samples at 1 kHz) is ~2 % of a 50 Hz frequency.
 
     Returns
     -------
@@ -132,21 +160,58 @@ def dominant_frequency(
         mag[peaks] >= float(min_peak_ratio) * float(np.max(mag[1:]))
     )
     peaks = peaks[keep]
+    if harmonics == "fundamental":
+        peaks = peaks[~harmonic_mask(peaks, harmonic_tol)]
+    elif harmonics != "keep":
+        raise ValueError(
+            f"harmonics must be 'keep' or 'fundamental'; got {harmonics!r}"
+        )
     if len(peaks) == 0:
         return float("nan")
     # p(k, .): peaks by amplitude, largest first (ties: lower frequency first).
     order = peaks[np.lexsort((freqs[peaks], -mag[peaks]))]
     pf = freqs[order]
+    pv = (
+        (order + parabolic_offset(mag, order)) * (freqs[1] - freqs[0])
+        if interpolate
+        else pf
+    )
     ranks = np.arange(1, n_peaks + 1)
     f_i = np.full(len(fmax), np.nan)
     for m, limit in enumerate(fmax):
-        p = pf[pf <= limit][:n_peaks]
+        p = pv[pf <= limit][:n_peaks]
         if len(p) == 0:
             continue
         top_j = np.cumsum(p) / np.arange(1, len(p) + 1)  # mean of the top j peaks
         # Fewer than n_peaks peaks: the top-j mean for j beyond them is the mean of all.
         f_i[m] = float(np.mean(top_j[np.minimum(ranks, len(p)) - 1]))
     return float(np.nanmean(f_i)) if np.isfinite(f_i).any() else float("nan")
+
+
+def harmonic_mask(bins: ArrayLike, tol: float) -> NDArray[np.bool_]:
+    """True for each DFT bin that is the ``m``-th harmonic (m >= 2) of a lower one in
+    ``bins``: ``|k_j - m k_i| <= max(1, tol m k_i)``."""
+    k = np.asarray(bins, dtype=np.float64)
+    if len(k) < 2:
+        return np.zeros(len(k), dtype=bool)
+    kj, ki = k[:, None], k[None, :]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        m = np.rint(kj / ki)
+    near = np.abs(kj - m * ki) <= np.maximum(1.0, tol * m * ki)
+    return np.asarray(((m >= 2) & (ki < kj) & near).any(axis=1))
+
+
+def parabolic_offset(mag: FloatArray, bins: ArrayLike) -> FloatArray:
+    """Offset (bins, in [-0.5, 0.5]) of the parabola's vertex through the log magnitudes
+    at ``bins - 1, bins, bins + 1``; 0 where a magnitude is 0 or the three are not a
+    maximum."""
+    k = np.asarray(bins, dtype=np.int64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a, b, c = (np.log(mag[np.clip(k + d, 0, len(mag) - 1)]) for d in (-1, 0, 1))
+        den = a - 2.0 * b + c
+        off = 0.5 * (a - c) / den
+    ok = np.isfinite(off) & (den < 0)
+    return np.where(ok, np.clip(off, -0.5, 0.5), 0.0)
 
 
 # -- eq. 3 inverted ------------------------------------------------------------------------
@@ -234,21 +299,28 @@ class _FrequencyTrack:
     def __init__(self, est: StickSlipSpeed) -> None:
         self.est = est
         self.buf: deque[float] = deque(maxlen=int(est.window))
+        self.force: deque[float] = deque(maxlen=int(est.window))
         self.n = 0
         self.f = float("nan")
+        self.fn = float("nan")
 
     def reset(self) -> None:
         self.buf.clear()
+        self.force.clear()
         self.n = 0
         self.f = float("nan")
+        self.fn = float("nan")
 
-    def update(self, value: float) -> tuple[float, bool]:
-        """Append one sample; return (current f_d in Hz, whether it was just recomputed)."""
+    def update(self, value: float, force: float = math.nan) -> tuple[float, bool]:
+        """Append one sample (and its normal force, N); return (current f_d in Hz,
+        whether it was just recomputed). ``fn`` holds the window's mean force."""
         self.buf.append(float(value))
+        self.force.append(float(force))
         self.n += 1
         w, h = int(self.est.window), int(self.est.hop)
         if self.n >= w and (self.n - w) % h == 0:
             self.f = self.est._window_frequency(np.fromiter(self.buf, np.float64, w))
+            self.fn = float(np.mean(np.fromiter(self.force, np.float64, w)))
             return self.f, True
         return self.f, False
 
@@ -274,10 +346,25 @@ class StickSlipSpeed(RegressorMixin, BaseEstimator):
         Samples between estimates (frames).
     detrend_frames, n_peaks, f_max_range, f_max_step, pad_factor, min_peak_ratio
         As in :func:`dominant_frequency` (the paper: 300, 10, (15, 40) Hz, 1 Hz, 1, 0).
+    harmonics, harmonic_tol, interpolate
+        As in :func:`dominant_frequency` (the paper: "keep", -, False).
+    allow_aliasing : bool
+        ``fit`` refuses (:class:`~slipkit.errors.SlipkitError`) a ``f_max_range``
+        reaching the Nyquist limit ``rate_hz / 2``, and a rate whose Nyquist limit is
+        below the saturation frequency (stick-slip frequencies up to saturation would
+        fold back into the band) unless this is True; then ``alias_speed_mm_s_`` is the
+        speed above which estimates are aliased.
     form : {"exact", "paper"}
         Which frequency-speed law is inverted.
     normal_force_N : float
-        Normal load per nib (N).
+        Normal load per nib (N): the fixed value used when ``normal_force="value"``, the
+        reference of a calibrated stick length otherwise.
+    normal_force : {"value", "input"}
+        Where the normal force comes from: ``"value"`` (``normal_force_N``, one number
+        for every trial; ``fit`` warns with :class:`FixedNormalForceWarning`: the speed
+        is proportional to the normal force, so its relative error passes 1:1 to the
+        speed) or ``"input"``: ``X`` has a second column, the measured normal force per
+        nib (N), averaged over each analysis window.
     mu_s, mu_k : float
         Static and kinetic friction of the object on the skin.
     M_kg, k_l_N_m : float
@@ -288,13 +375,24 @@ class StickSlipSpeed(RegressorMixin, BaseEstimator):
     Attributes
     ----------
     stick_length_m_ : float
-        ``d = (mu_s - mu_k) Fn / k_l`` (exact) or ``mu_s Fn / k_l`` (paper), in m.
+        ``d = (mu_s - mu_k) Fn / k_l`` (exact) or ``mu_s Fn / k_l`` (paper), in m, at
+        ``Fn = normal_force_N``.
     w0_ : float
         Nib natural angular frequency (rad/s).
     saturation_hz_ : float
         Frequency at and above which the speed is undefined (Hz).
+    nyquist_hz_ : float
+        ``rate_hz / 2`` (Hz).
+    alias_speed_mm_s_ : float
+        Speed (mm/s) whose stick-slip frequency is the Nyquist limit: faster pulls
+        alias (NaN when saturation lies below Nyquist: no speed aliases).
+    normal_force_source_ : str
+        ``"value 0.05 N"`` or ``"input column 1"``.
+    speed_per_force_ : float
+        Relative speed error per relative normal-force error (:data:`SPEED_PER_FORCE`,
+        1: a force 30 % off gives a speed 30 % off).
     n_features_in_ : int
-        Channels seen in ``fit`` (1).
+        Channels seen in ``fit`` (1, or 2 with ``normal_force="input"``).
     """
 
     _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
@@ -307,8 +405,13 @@ class StickSlipSpeed(RegressorMixin, BaseEstimator):
         "f_max_step": [Interval(Real, 0, None, closed="neither")],
         "pad_factor": [Interval(Integral, 1, None, closed="left")],
         "min_peak_ratio": [Interval(Real, 0, 1, closed="both")],
+        "harmonics": [StrOptions({"keep", "fundamental"})],
+        "harmonic_tol": [Interval(Real, 0, 1, closed="left")],
+        "interpolate": ["boolean"],
+        "allow_aliasing": ["boolean"],
         "form": [StrOptions({"exact", "paper"})],
         "normal_force_N": [Interval(Real, 0, None, closed="neither")],
+        "normal_force": [StrOptions({"value", "input"})],
         "mu_s": [Interval(Real, 0, None, closed="neither")],
         "mu_k": [Interval(Real, 0, None, closed="neither")],
         "M_kg": [Interval(Real, 0, None, closed="neither")],
@@ -328,8 +431,13 @@ class StickSlipSpeed(RegressorMixin, BaseEstimator):
         f_max_step: float = 1.0,
         pad_factor: int = 1,
         min_peak_ratio: float = 0.0,
+        harmonics: str = "keep",
+        harmonic_tol: float = 0.03,
+        interpolate: bool = False,
+        allow_aliasing: bool = False,
         form: str = "exact",
         normal_force_N: float = 0.05,
+        normal_force: str = "value",
         mu_s: float = 0.55,
         mu_k: float = 0.45,
         M_kg: float = 1.4e-5,
@@ -345,8 +453,13 @@ class StickSlipSpeed(RegressorMixin, BaseEstimator):
         self.f_max_step = f_max_step
         self.pad_factor = pad_factor
         self.min_peak_ratio = min_peak_ratio
+        self.harmonics = harmonics
+        self.harmonic_tol = harmonic_tol
+        self.interpolate = interpolate
+        self.allow_aliasing = allow_aliasing
         self.form = form
         self.normal_force_N = normal_force_N
+        self.normal_force = normal_force
         self.mu_s = mu_s
         self.mu_k = mu_k
         self.M_kg = M_kg
@@ -364,27 +477,57 @@ class StickSlipSpeed(RegressorMixin, BaseEstimator):
             f_max_step=self.f_max_step,
             pad_factor=self.pad_factor,
             min_peak_ratio=self.min_peak_ratio,
+            harmonics=self.harmonics,
+            harmonic_tol=self.harmonic_tol,
+            interpolate=self.interpolate,
         )
 
     def segment_frequency(self, x: ArrayLike) -> float:
         """``f_d`` of one whole signal segment (Hz), e.g. one steady pull (the paper)."""
         return self._window_frequency(np.asarray(x, dtype=np.float64).reshape(-1))
 
-    def _recording_frequency(self, x: FloatArray) -> FloatArray:
-        """``f_d`` per sample of one recording (NaN in the warm-up), held between hops."""
+    def _recording_frequency(
+        self, x: FloatArray, *, strict: bool = False, where: str = "the recording"
+    ) -> FloatArray:
+        """``f_d`` per sample of one recording (NaN in the warm-up), held between hops.
+
+        ``strict``: a recording shorter than ``window`` is an error (it would be NaN
+        throughout), naming the window and the recording's length.
+        """
+        return self._recording_windows(x, x, strict=strict, where=where)[0]
+
+    def _recording_windows(
+        self, x: FloatArray, force: FloatArray, *, strict: bool, where: str
+    ) -> tuple[FloatArray, FloatArray]:
+        """(``f_d``, window-mean ``force``) per sample of one recording, held between hops."""
         n, w, h = len(x), int(self.window), int(self.hop)
-        out = np.full(n, np.nan)
+        out, fn = np.full(n, np.nan), np.full(n, np.nan)
         if n < w:
-            return out
+            if strict:
+                rate = float(self.rate_hz)
+                raise SlipkitError(
+                    f"{type(self).__name__}: window {w} samples ({w / rate:g} s at "
+                    f"{rate:g} Hz) is longer than {where} ({n} samples, {n / rate:g} s): "
+                    "no frequency could be estimated; use a window of at most "
+                    f"{n} samples"
+                )
+            return out, fn
         ends = np.arange(w - 1, n, h)  # sample index at which each estimate is made
         views = sliding_window_view(x, w)[ends - (w - 1)]
         vals = np.array(
             [self._window_frequency(np.ascontiguousarray(v)) for v in views]
         )
+        fviews = sliding_window_view(force, w)[ends - (w - 1)]
+        fvals = np.array([float(np.mean(np.ascontiguousarray(v))) for v in fviews])
         idx = np.searchsorted(ends, np.arange(n), side="right") - 1
         have = idx >= 0
         out[have] = vals[idx[have]]
-        return out
+        fn[have] = fvals[idx[have]]
+        return out, fn
+
+    @property
+    def _n_channels(self) -> int:
+        return 2 if self.normal_force == "input" else 1
 
     def _check(self, X: ArrayLike, *, reset: bool) -> FloatArray:
         Xv = np.asarray(
@@ -392,12 +535,50 @@ class StickSlipSpeed(RegressorMixin, BaseEstimator):
                 self, X, reset=reset, dtype=np.float64, ensure_all_finite=False
             )
         )
-        if Xv.shape[1] != 1:
+        if Xv.shape[1] != self._n_channels:
+            what = (
+                "the nib signal and the normal force (N), normal_force='input'"
+                if self._n_channels == 2
+                else "the nib signal; normal_force='value'"
+            )
             raise ValueError(
-                f"{type(self).__name__} reads 1 channel (the nib signal); X has "
-                f"{Xv.shape[1]}"
+                f"{type(self).__name__} reads {self._n_channels} channel(s) ({what}); "
+                f"X has {Xv.shape[1]}"
             )
         return Xv
+
+    def _check_rate(self) -> None:
+        """Refuse a band the stream's Nyquist limit cannot carry (SlipkitError)."""
+        rate = float(self.rate_hz)
+        nyq = 0.5 * rate
+        self.nyquist_hz_ = nyq
+        hi = float(self.f_max_range[1])
+        if hi >= nyq:
+            raise SlipkitError(
+                f"{type(self).__name__}: f_max_range {list(self.f_max_range)} Hz reaches "
+                f"the Nyquist limit {nyq:g} Hz of rate_hz {rate:g} Hz: frequencies "
+                f"above {nyq:g} Hz fold back (alias) into the band; use an f_max below "
+                f"{nyq:g} Hz or a stream sampled above {2 * hi:g} Hz"
+            )
+        alias = math.nan
+        if self.saturation_hz_ >= nyq:
+            with np.errstate(divide="ignore"):
+                alias = float(
+                    1e3
+                    * _invert(
+                        np.array([nyq]), self.stick_length_m_, self.w0_, self.form
+                    )[0]
+                )
+            if not self.allow_aliasing:
+                raise SlipkitError(
+                    f"{type(self).__name__}: at rate_hz {rate:g} Hz (Nyquist "
+                    f"{nyq:g} Hz) the stick-slip band up to saturation "
+                    f"({self.saturation_hz_:.1f} Hz) aliases: pulls faster than "
+                    f"{alias:.3g} mm/s would read as lower frequencies (wrong speeds, no "
+                    "warning); sample at >= "
+                    f"{2 * self.saturation_hz_:.0f} Hz or set allow_aliasing=true"
+                )
+        self.alias_speed_mm_s_ = alias
 
     def _physics_length(self) -> float:
         if self.form == "exact":
@@ -431,6 +612,21 @@ class StickSlipSpeed(RegressorMixin, BaseEstimator):
             saturation_frequency(self.M_kg, self.k_l_N_m, form=self.form)  # type: ignore[arg-type]
         )
         self.stick_length_m_ = self._physics_length()
+        self._check_rate()
+        self.speed_per_force_ = SPEED_PER_FORCE
+        if self.normal_force == "input":
+            self.normal_force_source_ = "input column 1"
+        else:
+            self.normal_force_source_ = f"value {float(self.normal_force_N):g} N"
+            warnings.warn(
+                f"{type(self).__name__}: one fixed normal force "
+                f"({float(self.normal_force_N):g} N per nib) for every trial; the speed "
+                "is proportional to it (speed_per_force_ = 1): a force 30 % off gives "
+                "a speed 30 % off. Feed the measured force (normal_force='input') "
+                "when it varies",
+                FixedNormalForceWarning,
+                stacklevel=2,
+            )
         if self.calibrate:
             f = self._frequencies(Xv, segments)
             ok = np.isfinite(f) & (f > 0) & np.isfinite(yv) & (yv > 0)
@@ -455,18 +651,37 @@ class StickSlipSpeed(RegressorMixin, BaseEstimator):
             self.stick_length_m_ = float(np.exp(res.x))
         return self
 
+    def _windows(
+        self, Xv: FloatArray, segments: ArrayLike | None
+    ) -> tuple[FloatArray, FloatArray]:
+        f, fn = np.empty(len(Xv)), np.empty(len(Xv))
+        bounds = segment_bounds(len(Xv), segments)
+        for k, (a, b) in enumerate(bounds):
+            where = "the recording" if len(bounds) == 1 else f"recording {k} (0-based)"
+            force = Xv[a:b, 1] if Xv.shape[1] > 1 else Xv[a:b, 0]
+            f[a:b], fn[a:b] = self._recording_windows(
+                Xv[a:b, 0], force, strict=True, where=where
+            )
+        return f, fn
+
     def _frequencies(self, Xv: FloatArray, segments: ArrayLike | None) -> FloatArray:
-        out = np.empty(len(Xv))
-        for a, b in segment_bounds(len(Xv), segments):
-            out[a:b] = self._recording_frequency(Xv[a:b, 0])
-        return out
+        return self._windows(Xv, segments)[0]
 
     def frequency(
         self, X: ArrayLike, *, segments: ArrayLike | None = None
     ) -> FloatArray:
-        """Dominant frequency ``f_d`` per sample (Hz; NaN in the warm-up)."""
+        """Dominant frequency ``f_d`` per sample (Hz; NaN in the warm-up).
+
+        Raises :class:`~slipkit.errors.SlipkitError` when a recording is shorter than
+        ``window`` (it would be NaN throughout)."""
         check_is_fitted(self, "stick_length_m_")
         return self._frequencies(self._check(X, reset=False), segments)
+
+    def _force_scale(self, fn: ArrayLike) -> FloatArray | float:
+        """Speed factor of the window's mean normal force: ``Fn / normal_force_N``."""
+        if self.normal_force != "input":
+            return 1.0
+        return np.asarray(fn, dtype=np.float64) / float(self.normal_force_N)
 
     def speed_from_frequency(self, f_hz: ArrayLike) -> FloatArray:
         """Eq. 3 inverted with the fitted stick length: speed (mm/s), NaN at saturation."""
@@ -482,8 +697,13 @@ class StickSlipSpeed(RegressorMixin, BaseEstimator):
             return 1.0 / _period(v, self.stick_length_m_, self.w0_, self.form)
 
     def predict(self, X: ArrayLike, *, segments: ArrayLike | None = None) -> FloatArray:
-        """Speed per sample (mm/s); NaN in the warm-up, without a peak, or at saturation."""
-        return self.speed_from_frequency(self.frequency(X, segments=segments))
+        """Speed per sample (mm/s); NaN in the warm-up, without a peak, or at saturation.
+
+        With ``normal_force="input"`` the speed scales with the window's mean normal
+        force (eq. 3: the stick length is proportional to ``Fn``)."""
+        check_is_fitted(self, "stick_length_m_")
+        f, fn = self._windows(self._check(X, reset=False), segments)
+        return self.speed_from_frequency(f) * self._force_scale(fn)
 
     def stream(self) -> SpeedStream:
         """The sample-by-sample form: ``update(sample) -> (f_d Hz, speed mm/s)``."""
@@ -510,11 +730,15 @@ class SpeedStream:
         self.speed = float("nan")
 
     def update(self, sample: ArrayLike) -> tuple[float, float]:
-        """Feed one sample (1,) or scalar; return (frequency Hz, speed mm/s) now."""
-        x = float(np.asarray(sample, dtype=np.float64).reshape(-1)[0])
-        f, new = self.track.update(x)
+        """Feed one sample ((1,) / scalar, or (nib, normal force N) with
+        ``normal_force="input"``); return (frequency Hz, speed mm/s) now."""
+        row = np.asarray(sample, dtype=np.float64).reshape(-1)
+        x = float(row[0])
+        force = float(row[1]) if len(row) > 1 else x
+        f, new = self.track.update(x, force)
         if new:  # invert only when a new estimate was made (every hop samples)
-            self.speed = float(self.est.speed_from_frequency(f)[0])
+            scale = float(self.est._force_scale(self.track.fn))
+            self.speed = float(self.est.speed_from_frequency(f)[0]) * scale
         return f, self.speed
 
 
@@ -608,7 +832,9 @@ class DropAcceleration(RegressorMixin, BaseEstimator):
         if self.feature == "deflection":
             return _trailing_mean(x, int(self.smooth_frames))
         assert self.speed_ is not None
-        v = self.speed_.predict(x[:, None]) * 1e-3  # m/s
+        # lenient: a drop shorter than the speed window has no slope (NaN), as before
+        f = self.speed_._recording_frequency(x)
+        v = self.speed_.speed_from_frequency(f) * 1e-3  # m/s
         k = int(self.slope_frames)
         out = np.full(len(x), np.nan)
         if len(x) >= k:
@@ -648,9 +874,13 @@ class DropAcceleration(RegressorMixin, BaseEstimator):
         self.speed_: StickSlipSpeed | None = None
         if self.feature == "frequency_slope":
             # The speed law needs no calibration data: eq. 3 with the given physics.
-            self.speed_ = self._speed_estimator().fit(
-                np.zeros((1, 1)), np.full(1, np.nan)
-            )
+            # The fixed-force warning does not apply: the regression below absorbs a
+            # constant speed scale (a force off by a factor scales the slope by it).
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", FixedNormalForceWarning)
+                self.speed_ = self._speed_estimator().fit(
+                    np.zeros((1, 1)), np.full(1, np.nan)
+                )
         feat = self._features(Xv, segments)
         ok = np.isfinite(feat) & np.isfinite(yv)
         if ok.sum() < 2 or np.ptp(feat[ok]) == 0:
