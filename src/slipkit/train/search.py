@@ -43,8 +43,8 @@ def _progress(label: str, done: int, total: int, start: float, extra: str = "") 
     line = (
         f"{label}: {done}/{total} done, {elapsed:.0f} s elapsed, ETA {eta:.0f} s{extra}"
     )
+    # stderr, not the log: slipkit's log goes to stdout and the run's train.log.
     print(line, file=sys.stderr, flush=True)
-    log.info(line)
 
 
 def _check_groups(groups: np.ndarray, cv: int, unit: str) -> None:

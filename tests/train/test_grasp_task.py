@@ -1,0 +1,181 @@
+"""Grasp stability (BTS3v2): split by object, selection on training objects only."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from hydra import compose, initialize_config_dir
+from sklearn.linear_model import LogisticRegression
+from sklearn.svm import SVC
+
+import slipkit
+from slipkit.data.dataset import Dataset
+from slipkit.data.importers.bts3v2 import CHANNELS, ORIENTATIONS, read_bts3v2
+from slipkit.errors import SlipkitError
+from slipkit.train.commands import train_main
+from slipkit.train.tasks.grasp import GraspFeatures, GraspStability
+
+#: Per-orientation electrode baselines (counts): the shift the task must cope with.
+BASELINE = {"palm_down": 2800.0, "palm_side": 2950.0, "palm_45": 3150.0}
+
+
+def write_synthetic_bts3v2(folder: Path, n_objects: int = 12, seed: int = 0) -> Path:
+    """BTS3v2 layout: slipped when electrodes 0-5 of the thumb read low, plus an
+    orientation-dependent baseline."""
+    rng = np.random.default_rng(seed)
+    folder.mkdir()
+    for orientation in ORIENTATIONS:
+        rows = []
+        for k in range(n_objects):
+            for _ in range(10):
+                e = BASELINE[orientation] + rng.normal(0.0, 30.0, 72)
+                slipped = int(rng.random() < 0.5)
+                e[48:54] -= 0.0 if slipped else 150.0
+                rows.append([f"obj{k}", slipped, *e.round(0)])
+        pd.DataFrame(rows, columns=["object", "slipped", *CHANNELS]).to_csv(
+            folder / f"bts3v2_{orientation}.csv", index=False
+        )
+    return folder
+
+
+@pytest.fixture(scope="module")
+def synthetic(tmp_path_factory: pytest.TempPathFactory) -> Dataset:
+    return read_bts3v2(write_synthetic_bts3v2(tmp_path_factory.mktemp("d") / "bts"))
+
+
+def _task(**kw: object) -> GraspStability:
+    base: dict[str, object] = {
+        "model_name": "logreg",
+        "candidates": {"svm": SVC()},
+        "n_trials": 2,
+        "cv": 3,
+        "spaces": {
+            "logreg": {"C": [0.01, 10.0, "log"], "normalise": {"choices": ["none"]}},
+            "svm": {"C": [0.1, 10.0, "log"]},
+        },
+    }
+    return GraspStability(**{**base, **kw})  # type: ignore[arg-type]
+
+
+def _relabel(dataset: Dataset, ids: list[str]) -> Dataset:
+    """``dataset`` with the classes of ``ids`` swapped (wrong labels)."""
+    trials = dataset.trials.copy()
+    rows = trials["trial_id"].isin(ids)
+    trials.loc[rows, "slip_class"] = np.where(
+        trials.loc[rows, "slip_class"] == "stable", "slipped", "stable"
+    )
+    return Dataset(
+        sensor=dataset.sensor,
+        streams=dataset.streams,
+        trials=trials,
+        tables=dataset.tables,
+        labels=dataset.labels,
+        groups=dataset.groups,
+        provenance=dataset.provenance,
+        name=dataset.name,
+    )
+
+
+def test_grasp_split_keeps_objects_apart_and_reports_the_controls(
+    synthetic: Dataset, tmp_path: Path
+) -> None:
+    """Test objects never reach training; metrics hold per-orientation and majority scores."""
+    m = _task().fit(LogisticRegression(), synthetic, seed=0, out=tmp_path).metrics
+    sp = m["split"]
+    assert set() == set(sp["train_objects"]) & set(sp["test_objects"])
+    assert 360 == sp["n_train"] + sp["n_test"]
+    assert set(ORIENTATIONS) == set(m["test"]["per_orientation"])
+    assert 0.5 == m["majority_control_test"]["balanced_accuracy"]
+    assert m["test"]["balanced_accuracy"] > 0.9  # the synthetic rule is easy
+    assert m["selection"]["best"]["model"] in {"logreg", "svm"}
+    assert 4 == len(m["selection"]["candidates"])
+    assert {"scores.csv", "normalisation.csv"} <= {p.name for p in tmp_path.iterdir()}
+
+
+def test_grasp_test_labels_cannot_change_the_selection_or_the_objective(
+    synthetic: Dataset, tmp_path: Path
+) -> None:
+    """Swapping the labels of the held-out objects changes test scores, not the choice."""
+    task = _task()
+    clean = task.fit(LogisticRegression(), synthetic, seed=0, out=tmp_path).metrics
+    test_ids = synthetic.trials.loc[
+        synthetic.trials["object"].isin(clean["split"]["test_objects"]), "trial_id"
+    ].tolist()
+    bad = task.fit(
+        LogisticRegression(), _relabel(synthetic, test_ids), seed=0, out=tmp_path
+    ).metrics
+    assert clean["test"]["accuracy"] != bad["test"]["accuracy"]
+    assert clean["selection"] == bad["selection"]
+    assert task.objective_value(clean) == task.objective_value(bad)
+
+
+def test_per_orientation_features_remove_the_orientation_baseline(
+    synthetic: Dataset,
+) -> None:
+    """per_orientation standardises each orientation to zero mean; per_grasp zeroes each pad's mean."""
+    X, _, _ = GraspStability().arrays(synthetic)
+    per_o = GraspFeatures(normalise="per_orientation").fit(X).transform(X)
+    onehot = X[:, 72:] > 0.5
+    for k in range(3):
+        assert np.allclose(0.0, per_o[onehot[:, k]].mean(axis=0), atol=1e-9)
+    per_g = GraspFeatures(normalise="per_grasp").fit(X).transform(X)
+    assert np.allclose(0.0, per_g.reshape(len(X), 3, 24).mean(axis=2), atol=1e-9)
+    with_o = GraspFeatures(normalise="orientation_feature").fit(X).transform(X)
+    assert (len(X), 75) == with_o.shape
+
+
+def test_grasp_task_names_a_missing_column(synthetic: Dataset, tmp_path: Path) -> None:
+    """A group column the dataset lacks is refused, naming it."""
+    with pytest.raises(SlipkitError, match="'grip'"):
+        GraspStability(group="grip").fit(
+            LogisticRegression(), synthetic, seed=0, out=tmp_path
+        )
+
+
+def test_train_bts3v2_stability_end_to_end_on_a_synthetic_recording(
+    tmp_path: Path,
+) -> None:
+    """slipkit train experiment=bts3v2_stability reads a BTS3v2 folder; objective = validation."""
+    raw = write_synthetic_bts3v2(tmp_path / "bts3v2", n_objects=8)
+    run = tmp_path / "run"
+    with initialize_config_dir(
+        config_dir=str(slipkit.config_dir()), version_base="1.3"
+    ):
+        cfg = compose(
+            config_name="train",
+            overrides=[
+                "experiment=bts3v2_stability",
+                f"dataset.raw={raw}",
+                f"run_dir={run}",
+                "task.n_trials=1",
+                "task.cv=2",
+                "task.candidates.mlp.max_iter=20",
+            ],
+        )
+    objective = train_main(cfg)
+    info = json.loads((run / "run.json").read_text())
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert "validation.balanced_accuracy" == info["objective"]["name"]
+    assert metrics["validation"]["balanced_accuracy"] == objective
+    assert {"logreg", "svm", "mlp"} == set(metrics["selection"]["by_model"])
+
+
+@pytest.mark.realdata
+@pytest.mark.slow
+def test_bts3v2_on_the_real_recordings_beats_75_percent(
+    shared_data: Path, tmp_path: Path
+) -> None:
+    """On held-out real objects the selected model passes 75 % accuracy (majority ~50 %)."""
+    folder = shared_data / "bts3v2"
+    if not folder.is_dir():
+        pytest.skip(f"{folder} not present")
+    task = _task(cv=3, n_trials=2)
+    m = task.fit(
+        LogisticRegression(), read_bts3v2(folder), seed=0, out=tmp_path
+    ).metrics
+    assert m["test"]["accuracy"] >= 0.75
+    assert m["majority_control_test"]["accuracy"] < 0.6
