@@ -8,7 +8,11 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import pytest
+from hydra import compose, initialize_config_dir
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
+from slipkit import config_dir
 from slipkit.data import LabelSpec, StreamSpec
 from slipkit.sim import (
     EFFECTS,
@@ -18,7 +22,8 @@ from slipkit.sim import (
     phase_times,
     sample_times,
 )
-from slipkit.sim.core import EFFECT_DRAWS, draw_effect_params
+from slipkit.sim.commands import build_scene
+from slipkit.sim.core import EFFECT_DRAWS, draw_effect_params, effect_name
 
 #: Effects added for issue 14 (hard variants); the spy test checks they exist too.
 NEW_EFFECTS = {
@@ -93,6 +98,40 @@ def test_unnamed_effects_are_never_called(monkeypatch: pytest.MonkeyPatch) -> No
     scene.simulate(3, seed=0)
     assert NEW_EFFECTS == NEW_EFFECTS & set(EFFECTS)
     assert ["white_noise"] * 3 == called
+
+
+VARIANTS = sorted(
+    p.stem
+    for p in (config_dir() / "scene").glob("*.yaml")
+    if "defaults" in p.read_text()
+)
+
+
+@pytest.mark.parametrize("name", VARIANTS)
+def test_variants_call_exactly_their_listed_effects_in_order(
+    name: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A variant scene with drawn ranges calls its listed effects once each, in `order`, no other."""
+    called: list[str] = []
+    for effect in list(EFFECTS):
+        real = EFFECTS[effect]
+
+        def spy(
+            state: SceneState,
+            rng: np.random.Generator,
+            _name: str = effect,
+            _real: Any = real,
+            **kw: Any,
+        ) -> SceneState:
+            called.append(_name)
+            return _real(state, rng, **kw)
+
+        monkeypatch.setitem(EFFECTS, effect, spy)
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        cfg = compose(config_name="simulate", overrides=[f"scene={name}"])
+    scene = build_scene(cfg.scene)
+    scene.run_trial(0, seed=0)
+    assert [effect_name(k) for k in scene.effect_keys()] == called
 
 
 def test_effects_run_in_the_listed_order() -> None:
@@ -249,6 +288,26 @@ def test_choice_draws_each_option_and_undeclared_lists_pass_through() -> None:
         "quantisation@x", {"bits": 4, "full_scale": [0.0, 1.5]}, rng
     )
     assert ({"bits": 4, "full_scale": [0.0, 1.5]}, {}) == (kwargs, drawn)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    lo=st.floats(1e-6, 1e3),
+    span=st.floats(0.0, 1e3),
+    kind=st.sampled_from(["white_noise", "drift"]),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_draws_stay_inside_their_range(
+    lo: float, span: float, kind: str, seed: int
+) -> None:
+    """Any finite [lo, hi] (log or uniform) draws a value in [lo, hi], recorded under key.param."""
+    param = "sigma" if kind == "white_noise" else "rate_per_s"
+    hi = lo + span
+    kwargs, drawn = draw_effect_params(
+        kind, {param: [lo, hi]}, np.random.default_rng(seed)
+    )
+    assert lo * (1 - 1e-12) <= kwargs[param] <= hi * (1 + 1e-12)
+    assert {f"{kind}.{param}": kwargs[param]} == drawn
 
 
 @pytest.mark.parametrize(
