@@ -26,6 +26,7 @@ from slipkit.train.tasks.force import (
     FingerDirection,
     ForceRegression,
     angle_errors_deg,
+    contiguous_block_split,
 )
 
 torch.set_num_threads(1)
@@ -135,7 +136,8 @@ def test_train_and_evaluate_biotac_force_end_to_end(tmp_path: Path):
     for side in ("full", "train", "val", "test"):
         assert ["x", "y", "z"] == list(metrics[side]["rmse"])
         assert ["x", "y", "z"] == list(metrics[side]["smse"])
-    assert objective == pytest.approx(metrics["test"]["rmse_mean"])
+    assert objective == pytest.approx(metrics["validation"]["rmse_mean"])
+    assert 3 == len(metrics["validation"]["folds"])
     assert ["mlp3", "normals", "mlp1", "lwr"] == list(metrics["comparison"])
     table = pd.read_csv(run / "comparison.csv", index_col="model")
     assert ["mlp3", "normals", "mlp1", "lwr"] == list(table.index)
@@ -208,7 +210,7 @@ def test_finger_direction_beats_a_constant_on_a_synthetic_snapshot_dataset(
     )
     result = task.fit(WeightedNormalsRegressor(), dataset, seed=0, out=tmp_path)
     m = result.metrics
-    assert (400, "trial (sample)") == (
+    assert (400, "trial (sample), random") == (
         m["split"]["train"] + m["split"]["val"] + m["split"]["test"],
         m["split"]["by"],
     )
@@ -258,3 +260,64 @@ def test_finger_direction_on_the_real_recordings(shared_data: Path, tmp_path: Pa
         m["test"]["angle_mean_deg"]
         < m["constant_mean_direction"]["test"]["angle_mean_deg"]
     )
+
+
+@given(
+    n=st.integers(5, 400),
+    test_size=st.floats(0.05, 0.5),
+    val_size=st.floats(0.0, 0.4),
+    seed=st.integers(0, 20),
+)
+def test_block_split_holds_out_one_contiguous_block(
+    n: int, test_size: float, val_size: float, seed: int
+):
+    """The test side is one run of consecutive samples; the three sides partition them."""
+    tr, va, te = contiguous_block_split(
+        np.arange(n), test_size=test_size, val_size=val_size, seed=seed
+    )
+    assert int(np.ceil(test_size * n)) == len(te)
+    assert list(range(te[0], te[0] + len(te))) == te.tolist()
+    assert list(range(n)) == sorted([*tr, *va, *te])
+    assert len(tr) >= 1
+
+
+def _with_test_directions_flipped(dataset, ids):
+    """``dataset`` with the direction of the samples ``ids`` reversed (wrong targets)."""
+    from slipkit.data.dataset import Dataset
+
+    tables = dict(dataset.tables)
+    t = tables["truth_force_dir"].copy()
+    rows = t["trial_id"].isin(ids)
+    t.loc[rows, ["ux", "uy", "uz"]] *= -1.0
+    tables["truth_force_dir"] = t
+    return Dataset(
+        sensor=dataset.sensor,
+        streams=dataset.streams,
+        trials=dataset.trials,
+        tables=tables,
+        labels=dataset.labels,
+        groups=dataset.groups,
+        provenance=dataset.provenance,
+        name=dataset.name,
+    )
+
+
+def test_finger_direction_block_split_reports_both_and_keeps_test_out_of_validation(
+    tmp_path: Path,
+):
+    """Block split: scores of both splits; flipping the test targets changes test, not validation."""
+    dataset = read_robotic_finger(write_synthetic_finger(tmp_path / "finger", n=200))
+    task = FingerDirection(split="block", also_split=("random",), model_name="normals")
+    clean = task.fit(WeightedNormalsRegressor(), dataset, seed=0, out=tmp_path).metrics
+    assert ("contiguous block", {"block", "random"}) == (
+        clean["split"]["by"],
+        set(clean["splits"]),
+    )
+    order = np.arange(200)
+    _, _, te = contiguous_block_split(order, test_size=0.2, val_size=0.2, seed=0)
+    ids = [f"sample{k:04d}" for k in te]
+    flipped = _with_test_directions_flipped(dataset, ids)
+    bad = task.fit(WeightedNormalsRegressor(), flipped, seed=0, out=tmp_path).metrics
+    assert clean["test"]["angle_mean_deg"] != bad["test"]["angle_mean_deg"]
+    assert clean["validation"] == bad["validation"]
+    assert task.objective_value(clean) == task.objective_value(bad)
