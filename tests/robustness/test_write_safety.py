@@ -90,6 +90,7 @@ def _csv_source(folder: Path) -> Path:
 
 
 CSV_OPTS = ["source=csv", "source.sensor=fsr", "source.rate_hz=10", "source.units=N"]
+OVER = ["overwrite=true"]
 SIM_OPTS = ["scene=fsr_probe_slide", "n_trials=1", "progress=false", "summary=false"]
 
 
@@ -657,3 +658,34 @@ def test_commands_touch_nothing_but_their_own_out(
     assert {"again"} == {
         k.split("/")[2] for k in new if k.startswith("run/evaluations/")
     }
+
+
+def test_hostile_outs_in_a_lab_tree_change_nothing(
+    lab: dict[str, Path],
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """Every write option of every command aimed at a file or folder it did not write is refused; the tree stays byte-identical."""
+    tree = tmp_path / "lab"
+    _csv_source(tree / "csv")
+    (tree / "readme.txt").write_text("keep me\n")
+    (tree / "link-to-docs").symlink_to(tree / "docs")
+    before = _snapshot(tree)
+    monkeypatch.chdir(tree)
+    hostile = [
+        ["evaluate", "run=run", "dataset=sim", "name=../../docs"],
+        ["evaluate", "run=run", "dataset=sim", f"name={tree / 'docs'}"],
+        ["import", *CSV_OPTS, "path=csv", "out=csv", *OVER],
+        ["import", *CSV_OPTS, "path=csv", "out=docs", *OVER],
+        ["simulate", *SIM_OPTS, "out=readme.txt", *OVER],
+        ["simulate", *SIM_OPTS, "out=link-to-docs", *OVER],
+        ["simulate", *SIM_OPTS, "out=sim/streams/x.parquet"],
+        ["train", "experiment=fsr_roc", "dataset.path=sim", "run_dir=sim", *OVER],
+        ["export", "run=run", "out=docs", *OVER],
+        ["export", "run=run", "out=run/bundle"],
+        ["compare", "comparison=fsr", "out=docs", "progress=false", *OVER],
+        ["demo", "out=docs", "quick=true", "progress=false"],
+    ]
+    refused = [_cli(args, capsys)[0] for args in hostile]
+    assert ([2] * len(hostile), before) == (refused, _snapshot(tree))
