@@ -30,7 +30,8 @@ from slipkit.export.sliptack import (
 
 RATE = 1000.0
 W = 1000
-#: The detector config's settings (configs/detector/sliptack_frequency.yaml).
+#: The detector config's settings (configs/detector/sliptack_frequency.yaml) without
+#: the harmonic check and interpolation (:data:`REFINED`, tested on their own).
 PARAMS: dict[str, Any] = {
     "rate_hz": RATE,
     "window": W,
@@ -40,6 +41,8 @@ PARAMS: dict[str, Any] = {
 }
 #: Speeds agree within this relative difference (the speed table is built for 1e-7).
 SPEED_RTOL = 1e-6
+#: The issue-14 peak rules the shipped config adds (harmonic check, interpolation).
+REFINED: dict[str, Any] = {"harmonics": "fundamental", "interpolate": True}
 
 
 def _fitted(**params: Any) -> StickSlipSpeed:
@@ -131,6 +134,45 @@ def test_graph_matches_batch_on_simulated_pulls(
         assert np.array_equal(np.isfinite(ref), np.isfinite(ours))
         assert np.isfinite(ref).mean() > 0.9
         np.testing.assert_allclose(ours, ref, rtol=SPEED_RTOL, equal_nan=True)
+
+
+@pytest.mark.parametrize("quantity", ["speed", "frequency"])
+def test_refined_peaks_graph_matches_batch(
+    quantity: str, pulls: list[NDArray[np.float64]]
+) -> None:
+    """With the harmonic check and interpolation the graph equals the batch estimator, also on a 0.63 harmonic."""
+    est = _fitted(**REFINED)
+    graph = export_stick_slip_speed(est, quantity=quantity)
+    sess = onnx_session(graph)
+    t = np.arange(3000) / RATE
+    harmonic = (
+        0.1 * np.sin(2 * np.pi * 31.3 * t)
+        + 0.063 * np.sin(2 * np.pi * 62.6 * t + 1.0)
+        + np.random.default_rng(0).normal(0, 0.01, len(t))
+    )
+    for x in [*pulls, harmonic]:
+        ref_all = (
+            est.predict(x[:, None])
+            if quantity == "speed"
+            else est.frequency(x[:, None])
+        )
+        windows, inst = detector_windows(graph, x[:, None])
+        ours, ref = _run(graph, windows, sess), ref_all[inst]
+        assert np.array_equal(np.isfinite(ref), np.isfinite(ours))
+        np.testing.assert_allclose(ours, ref, rtol=SPEED_RTOL, equal_nan=True)
+    f = est.frequency(harmonic[:, None])
+    assert 31.3 == pytest.approx(float(np.nanmedian(f)), rel=0.01)
+
+
+def test_force_input_does_not_export() -> None:
+    """normal_force='input' has no graph: a clear ExportError."""
+    from slipkit.export.registry import ExportError
+
+    est = StickSlipSpeed(**PARAMS, normal_force="input").fit(
+        np.zeros((1, 2)), np.full(1, np.nan)
+    )
+    with pytest.raises(ExportError, match="normal_force='input'"):
+        export_stick_slip_speed(est)
 
 
 def test_float64_dft_agrees_with_float32(

@@ -48,7 +48,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from slipkit.baselines.base import DetectorStream, StreamDetector, segment_bounds
-from slipkit.errors import SlipkitError
+from slipkit.errors import SlipkitError, TrainingDataError
 from slipkit.physics.stick_slip import (
     natural_frequency,
     saturation_frequency,
@@ -188,17 +188,22 @@ def dominant_frequency(
     return float(np.nanmean(f_i)) if np.isfinite(f_i).any() else float("nan")
 
 
-def harmonic_mask(bins: ArrayLike, tol: float) -> NDArray[np.bool_]:
-    """True for each DFT bin that is the ``m``-th harmonic (m >= 2) of a lower one in
-    ``bins``: ``|k_j - m k_i| <= max(1, tol m k_i)``."""
+def harmonic_relation(bins: ArrayLike, tol: float) -> NDArray[np.bool_]:
+    """``rel[i, j]``: DFT bin ``bins[j]`` is the ``m``-th harmonic (m >= 2) of the lower
+    bin ``bins[i]``, i.e. ``|k_j - m k_i| <= max(1, tol m k_i)`` with ``m = rint(k_j /
+    k_i)``."""
     k = np.asarray(bins, dtype=np.float64)
-    if len(k) < 2:
-        return np.zeros(len(k), dtype=bool)
-    kj, ki = k[:, None], k[None, :]
+    ki, kj = k[:, None], k[None, :]
     with np.errstate(divide="ignore", invalid="ignore"):
         m = np.rint(kj / ki)
     near = np.abs(kj - m * ki) <= np.maximum(1.0, tol * m * ki)
-    return np.asarray(((m >= 2) & (ki < kj) & near).any(axis=1))
+    return np.asarray((m >= 2) & (ki < kj) & near)
+
+
+def harmonic_mask(bins: ArrayLike, tol: float) -> NDArray[np.bool_]:
+    """True for each DFT bin in ``bins`` that is a harmonic of a lower one in ``bins``
+    (:func:`harmonic_relation`)."""
+    return np.asarray(harmonic_relation(bins, tol).any(axis=0))
 
 
 def parabolic_offset(mag: FloatArray, bins: ArrayLike) -> FloatArray:
@@ -884,9 +889,10 @@ class DropAcceleration(RegressorMixin, BaseEstimator):
         feat = self._features(Xv, segments)
         ok = np.isfinite(feat) & np.isfinite(yv)
         if ok.sum() < 2 or np.ptp(feat[ok]) == 0:
-            raise ValueError(
+            raise TrainingDataError(
                 f"DropAcceleration({self.feature}): fewer than 2 distinct feature values "
-                "with a true acceleration; cannot fit the calibration line"
+                "with a true acceleration; cannot fit the calibration line (more "
+                "training trials)"
             )
         reg = LinearRegression().fit(feat[ok, None], yv[ok])
         self.coef_ = float(reg.coef_[0])

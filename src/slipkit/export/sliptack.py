@@ -67,7 +67,11 @@ from sklearn.base import BaseEstimator, ClassifierMixin
 from sklearn.utils._param_validation import HasMethods, Interval
 from sklearn.utils.validation import check_is_fitted
 
-from slipkit.baselines.sliptack import StickSlipSpeed, f_max_values
+from slipkit.baselines.sliptack import (
+    StickSlipSpeed,
+    f_max_values,
+    harmonic_relation,
+)
 from slipkit.export._graph import DOUBLE, FLOAT, GraphBuilder
 from slipkit.export.detectors import (
     NO_SCORE,
@@ -219,12 +223,26 @@ def _frequency(g: GraphBuilder, x: str, est: StickSlipSpeed, dft_dtype: str) -> 
     spectrum = np.isin(np.arange(n1 * k2n), pos[1:])
     gmax = _reduce(g, "ReduceMax", g.op("Mul", power, g.const(spectrum, dt)), (1,), 1)
     ratio2 = float(est.min_peak_ratio) ** 2  # on power
+    lower, upper = bins(0), bins(2)
     peak = g.op(
         "And",
-        g.op("And", g.op("Greater", mid, bins(0)), g.op("Greater", mid, bins(2))),
+        g.op("And", g.op("Greater", mid, lower), g.op("Greater", mid, upper)),
         g.op("GreaterOrEqual", mid, g.op("Mul", gmax, g.const(ratio2, dt))),
         stem="peak",
     )  # (b, c)
+    if est.harmonics == "fundamental":
+        # a counted peak at ~m x a lower counted peak is a harmonic: one MatMul with a
+        # constant (c, c) relation of the bins (harmonic_mask's rule on bin numbers)
+        rel = harmonic_relation(np.arange(1, c + 1), float(est.harmonic_tol))
+        hits = g.op(
+            "MatMul", g.op("Cast", peak, to=DOUBLE), _d(g, rel.astype(np.float64))
+        )
+        peak = g.op(
+            "And",
+            peak,
+            g.op("Less", hits, _d(g, 0.5)),
+            stem="fundamental",
+        )
     # a peak's power, -1 for other bins; per f_max, -inf above it (one broadcast Add:
     # the (n_fmax, c) tensors are the graph's largest after the DFT)
     score = g.op("Where", peak, mid, g.const(-1.0, dt))
@@ -240,7 +258,41 @@ def _frequency(g: GraphBuilder, x: str, est: StickSlipSpeed, dft_dtype: str) -> 
     valid = g.op(
         "Cast", g.op("GreaterOrEqual", top, g.const(0.0, dt)), to=DOUBLE, stem="valid"
     )
-    ftop = g.op("Mul", g.op("Gather", _d(g, freqs[1 : c + 1]), idx, axis=0), valid)
+    if est.interpolate:
+        # the parabola through the log powers (= 2 log magnitudes: the vertex offset is
+        # the same) of each bin and its neighbours, as parabolic_offset. Few nodes: the
+        # log of the whole spectrum once; twice the offset, (a - c) / (a - 2 b + c),
+        # clipped to +-1 and the half folded into the bin width; no den < 0 test (a
+        # strict maximum has one; other bins only need a finite value, as they are
+        # masked by ``valid`` below).
+        logp = g.op("Log", power)
+        if dt is np.float32:
+            logp = g.op("Cast", logp, to=DOUBLE)
+        la, lb, lc = (
+            g.op("Gather", logp, g.const(pos[lo : lo + c], np.int64), axis=1)
+            for lo in (0, 1, 2)
+        )
+        den = g.op("Sub", g.op("Add", la, lc), g.op("Add", lb, lb))
+        off2 = g.op("Div", g.op("Sub", la, lc), den)
+        finite = g.op("Equal", g.op("Sub", off2, off2), _d(g, 0.0))  # NaN, inf: False
+        off2 = g.op(
+            "Where", finite, g.op("Clip", off2, _d(g, -1.0), _d(g, 1.0)), _d(g, 0.0)
+        )
+        bin_hz = float(freqs[1] - freqs[0])
+        fb = g.op(
+            "Mul",
+            g.op("Add", off2, _d(g, 2.0 * np.arange(1, c + 1, dtype=np.float64))),
+            _d(g, 0.5 * bin_hz),
+            stem="peak_hz",
+        )  # (b, c)
+        fb = g.op(
+            "Expand",
+            g.op("Unsqueeze", fb, _axes(g, 1)),
+            g.const([1, len(fmax), c], np.int64),
+        )
+        ftop = g.op("Mul", g.op("GatherElements", fb, idx, axis=2), valid)
+    else:
+        ftop = g.op("Mul", g.op("Gather", _d(g, freqs[1 : c + 1]), idx, axis=0), valid)
     n_valid = g.op("ReduceSum", valid, _axes(g, 2), keepdims=1, stem="n_valid")  # L
     n_div = g.op("Max", n_valid, _d(g, 1.0))
     csf = g.op("CumSum", ftop, g.const(2, np.int64), stem="csf")
@@ -297,6 +349,8 @@ def speed_table(
     """
     f_lo = float(est.rate_hz) / (int(est.window) * int(est.pad_factor))
     f_hi = float(f_max_values(tuple(est.f_max_range), float(est.f_max_step))[-1])
+    if est.interpolate:  # a peak's frequency moves up to half a bin either way
+        f_lo, f_hi = 0.5 * f_lo, f_hi + 0.5 * f_lo
     f_hi = min(f_hi, float(est.saturation_hz_) * (1.0 - 1e-9))
     n = TABLE_MIN
     while True:
@@ -384,6 +438,11 @@ def export_stick_slip_speed(
         NaN; ``hop`` the estimator's, ``first_decision = window - 1``.
     """
     check_is_fitted(estimator, "stick_length_m_")
+    if estimator.normal_force != "value":
+        raise ExportError(
+            "StickSlipSpeed export: normal_force='input' (a second, force column) has "
+            "no graph yet; export an estimator with normal_force='value'"
+        )
     if quantity not in QUANTITIES:
         raise ExportError(f"quantity must be one of {QUANTITIES}; got {quantity!r}")
     if dft_dtype not in ("float32", "float64"):
@@ -448,6 +507,8 @@ def export_stick_slip_speed(
             "unit": unit,
             "form": str(estimator.form),
             "nfft": w * int(estimator.pad_factor),
+            "harmonics": str(estimator.harmonics),
+            "interpolate": bool(estimator.interpolate),
             "dft_factors": list(_factor(w * int(estimator.pad_factor))),
             "dft_dtype": dft_dtype,
             **note,
