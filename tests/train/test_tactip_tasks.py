@@ -389,3 +389,32 @@ def test_tactip_svm_same_config_twice_gives_identical_metrics(
 ) -> None:
     """experiment=tactip_svm with its in-run search gives the same metrics.json twice."""
     assert metrics_of(svm_run) == metrics_of(train(SMALL_SVM, tmp_path / "again"))
+
+
+def test_evaluate_on_the_training_data_says_so_in_one_line(
+    svm_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Evaluating on the training dataset, or some of its trials, prints one warning line."""
+    from slipkit.train.data import training_dataset
+
+    same = training_dataset(_compose("train", SMALL_SVM))
+    for name, ds, seen, shared in (
+        ("same", same, True, 8),
+        ("part", same.subset(same.trial_ids[:3]), False, 3),
+    ):
+        folder = save_dataset(ds, tmp_path / name)
+        capsys.readouterr()
+        out = evaluate_main(
+            _compose(
+                "evaluate", [f"run={svm_run}", f"dataset={folder}", f"name={name}"]
+            )
+        )
+        lines = capsys.readouterr().out.splitlines()
+        info = json.loads(out.read_text())["dataset"]
+        assert (seen, shared) == (
+            info["seen_in_training"],
+            info["trials_in_training_dataset"],
+        )
+        assert 1 == sum(line.startswith("warning:") for line in lines)
+        assert str(out) == lines[-1]
+        assert any(line.startswith("test.balanced_accuracy = ") for line in lines)

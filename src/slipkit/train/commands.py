@@ -156,6 +156,44 @@ def train_main(cfg: DictConfig) -> float:
     return objective
 
 
+def _provenance_digest(dataset: Any) -> str:
+    """sha256 of the dataset's provenance (JSON, sorted keys)."""
+    import hashlib
+    import json
+
+    text = json.dumps(dataset.provenance, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _shared_trials(info: dict[str, Any], dataset: Any) -> int | None:
+    """Trials of ``dataset`` whose id was in the run's training dataset, when both
+    datasets have the same provenance (0 when it differs); None for runs written
+    before run.json recorded trial ids."""
+    trained = info.get("dataset", {})
+    if "trial_ids" not in trained:
+        return None
+    if trained.get("provenance_sha256") != _provenance_digest(dataset):
+        return 0
+    return len(set(map(str, dataset.trial_ids)) & set(trained["trial_ids"]))
+
+
+def _overlap_line(info: dict[str, Any]) -> str:
+    """One warning line when the evaluated dataset overlaps the training data."""
+    if info["seen_in_training"]:
+        return (
+            "warning: this is the training dataset (same fingerprint): the scores "
+            "include the trials the model was fitted on, not held-out data"
+        )
+    shared = info.get("trials_in_training_dataset")
+    if shared:
+        return (
+            f"warning: {shared} of {info['n_trials']} trials have the ids and "
+            "provenance of trials in the training dataset: the scores are not "
+            "held-out data"
+        )
+    return ""
+
+
 def _dataset_info(dataset: Any, cfg: DictConfig) -> dict[str, Any]:
     node = cfg.dataset
     origin = (
@@ -175,6 +213,9 @@ def _dataset_info(dataset: Any, cfg: DictConfig) -> dict[str, Any]:
         "n_trials": len(dataset),
         "fingerprint": dataset.fingerprint(),
         **origin,
+        # what `slipkit evaluate` checks trial overlap against (same ids + provenance)
+        "provenance_sha256": _provenance_digest(dataset),
+        "trial_ids": [str(t) for t in dataset.trial_ids],
     }
 
 
@@ -218,12 +259,20 @@ def evaluate_main(cfg: DictConfig) -> Path:
                 "fingerprint": fingerprint,
                 "seen_in_training": fingerprint
                 == run.info.get("dataset", {}).get("fingerprint"),
+                "trials_in_training_dataset": _shared_trials(run.info, dataset),
             },
             **jsonable(metrics),
         }
         write_json(tmp / "metrics.json", payload)
+    overlap = _overlap_line(payload["dataset"])
+    if overlap:
+        print(overlap)
+    # The run's objective is a validation score; evaluate scores the same metric on
+    # the dataset as a whole (``test.<metric>``).
+    scored = task.objective.replace("validation.", "test.", 1)
     with contextlib.suppress(KeyError):  # a task may not score its objective here
-        print(f"{task.objective} = {task.objective_value(metrics):.4g}")
+        value = task.objective_value(metrics, scored)
+        print(f"{scored} = {value:.4g}")
     out = target / "metrics.json"
     print(out)
     return out

@@ -54,7 +54,10 @@ class Task(ABC):
     (or evaluation) folder only when the call returns.
     """
 
-    #: key of the metrics dict (dots for nesting) returned to a Hydra sweeper
+    #: key of the metrics dict (dots for nesting) returned to a Hydra sweeper. It must
+    #: name a validation score computed on the training side only (group-aware CV by
+    #: object or trial, ``validation.<metric>``), never the test split: a sweeper that
+    #: ranks runs by it then selects without looking at the test data.
     objective: str = "accuracy"
     #: "maximize" or "minimize" (the sweeper's direction for :attr:`objective`)
     direction: str = "maximize"
@@ -67,13 +70,17 @@ class Task(ABC):
     def evaluate(self, model: Any, dataset: Dataset, *, out: Path) -> dict[str, Any]:
         """Score the fitted ``model`` on all of ``dataset`` (data it never saw)."""
 
-    def objective_value(self, metrics: Mapping[str, Any]) -> float:
-        """The number named by :attr:`objective` in ``metrics`` (dots descend)."""
+    def objective_value(
+        self, metrics: Mapping[str, Any], name: str | None = None
+    ) -> float:
+        """The number named by :attr:`objective` (or ``name``) in ``metrics`` (dots
+        descend)."""
+        wanted = self.objective if name is None else name
         node: Any = metrics
-        for key in self.objective.split("."):
+        for key in wanted.split("."):
             if not isinstance(node, Mapping) or key not in node:
                 raise KeyError(
-                    f"{type(self).__name__}: objective {self.objective!r} not in metrics "
+                    f"{type(self).__name__}: objective {wanted!r} not in metrics "
                     f"(keys: {sorted(metrics)})"
                 )
             node = node[key]
