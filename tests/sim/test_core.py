@@ -336,7 +336,7 @@ def test_bad_ranges_name_the_field(value: list, match: str) -> None:
 
 
 def test_order_sets_the_evaluation_order_and_must_list_every_effect() -> None:
-    """`order` runs effects in its order (quantise last keeps the grid) and refuses a partial list."""
+    """`order` runs effects in its order, refuses a missing or repeated key, and skips keys of removed effects."""
     effects = {
         "quantisation": {"target": "sig", "bits": 4, "full_scale": (0.0, 1.5)},
         "white_noise": {"target": "sig", "sigma": 0.01},
@@ -353,3 +353,12 @@ def test_order_sets_the_evaluation_order_and_must_list_every_effect() -> None:
         SimulationError, match=r"scene.order must list each key.*\['quantisation'\]"
     ):
         Scene("ramp", Ramp(), effects, order=["white_noise"])
+    with pytest.raises(SimulationError, match=r"repeated \['white_noise'\]"):
+        Scene(
+            "ramp",
+            Ramp(),
+            effects,
+            order=["white_noise", "quantisation", "white_noise"],
+        )
+    removed = Scene("ramp", Ramp(), effects, order=["gone", *effects])
+    assert tuple(effects) == removed.effect_keys()

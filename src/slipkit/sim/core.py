@@ -254,9 +254,10 @@ class Scene:
         A parameter the effect declares drawable may be ``[lo, hi]``: drawn per trial
         (:func:`draw_effect_params`) and recorded in the trial's metadata.
     order : sequence of str, optional
-        Evaluation order, a permutation of the keys of ``effects``; default: their
-        mapping order. A variant that composes a base scene (Hydra defaults) can only
-        append effects to the base mapping, so it states the order here.
+        Evaluation order: every key of ``effects`` once (keys naming no listed effect
+        are skipped, so removing an effect from a variant needs no new order); default:
+        their mapping order. A variant that composes a base scene (Hydra defaults) can
+        only append effects to the base mapping, so it states the order here.
     """
 
     name: str
@@ -273,13 +274,15 @@ class Scene:
             )
         if self.order is not None:
             order = [str(k) for k in self.order]
-            if sorted(order) != sorted(self.effects) or len(set(order)) != len(order):
+            missing = sorted(set(self.effects) - set(order))
+            repeated = sorted({k for k in order if order.count(k) > 1})
+            if missing or repeated:
                 raise SimulationError(
                     f"scene {self.name!r}: scene.order must list each key of scene.effects "
-                    f"once; missing {sorted(set(self.effects) - set(order))}, "
-                    f"unknown or repeated {sorted(k for k in order if k not in self.effects or order.count(k) > 1)}"
+                    f"once; missing {missing}, repeated {repeated}"
                 )
-            self.order = tuple(order)
+            # Keys without an effect are skipped, so `~scene.effects.x` works on a variant.
+            self.order = tuple(k for k in order if k in self.effects)
 
     def effect_keys(self) -> tuple[str, ...]:
         """The effect keys in evaluation order."""
