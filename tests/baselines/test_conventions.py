@@ -14,12 +14,14 @@ as a script to print the detection table quoted in ``docs/baselines/fsr.md``::
 from __future__ import annotations
 
 import itertools
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 import pytest
 
 from slipkit.baselines.fsr import FSRTouchSlip
+from slipkit.baselines.sliptack import FixedNormalForceWarning, StickSlipSpeed
 from slipkit.errors import SlipkitError
 
 RATE = 2000.0  # Hz
@@ -323,3 +325,129 @@ def main() -> None:
 
 if __name__ == "__main__":
     main()
+
+
+# -- SlipTack: rates, harmonics, normal force -------------------------------------------------
+def sliptack_config(**over: object) -> StickSlipSpeed:
+    """configs/detector/sliptack_frequency.yaml (basswood friction), unfitted."""
+    from omegaconf import OmegaConf
+
+    from slipkit import config_dir
+
+    cfg = OmegaConf.to_container(
+        OmegaConf.load(config_dir() / "detector" / "sliptack_frequency.yaml")
+    )
+    assert isinstance(cfg, dict)
+    params = {k: v for k, v in cfg.items() if not str(k).startswith("_")}
+    return StickSlipSpeed(**{**params, **over})  # type: ignore[arg-type]
+
+
+def _fit(est: StickSlipSpeed, channels: int = 1) -> StickSlipSpeed:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FixedNormalForceWarning)
+        return est.fit(np.zeros((1, channels)), np.full(1, np.nan))
+
+
+def test_band_above_nyquist_is_refused_naming_rate_and_band() -> None:
+    """At 30 Hz the shipped f_max band (up to 100 Hz) is refused, naming the rate and the band."""
+    with pytest.raises(
+        SlipkitError,
+        match=r"f_max_range \[15.0, 100.0\] Hz reaches the Nyquist limit 15 Hz of "
+        r"rate_hz 30 Hz",
+    ):
+        _fit(sliptack_config(rate_hz=30.0, window=60))
+
+
+def test_band_below_nyquist_still_refused_when_stick_slip_can_alias() -> None:
+    """A band below 15 Hz at 30 Hz is refused too (saturation 130.8 Hz aliases) unless allowed, then flagged."""
+    est = sliptack_config(rate_hz=30.0, window=60, f_max_range=[5.0, 14.0])
+    with pytest.raises(SlipkitError, match=r"saturation \(130.8 Hz\) aliases"):
+        _fit(est)
+    flagged = _fit(est.set_params(allow_aliasing=True))
+    assert 15.0 == flagged.nyquist_hz_
+    assert np.isfinite(flagged.alias_speed_mm_s_)
+    assert np.isnan(_fit(sliptack_config()).alias_speed_mm_s_)  # 1 kHz: none
+
+
+def _two_tone(f0: float, n: int = 3000, seed: int = 0) -> np.ndarray:
+    t = np.arange(n) / 1000.0
+    rng = np.random.default_rng(seed)
+    return (
+        0.1 * np.sin(2 * np.pi * f0 * t + rng.uniform(0, 6))
+        + 0.063 * np.sin(4 * np.pi * f0 * t + rng.uniform(0, 6))
+        + rng.normal(0.0, 0.01, n)
+    )
+
+
+@pytest.mark.parametrize("f0", [25.0, 30.0, 44.0])
+def test_strong_second_harmonic_reads_as_the_fundamental(f0: float) -> None:
+    """A 0.63 second harmonic passing the 0.6 peak cut-off: shipped config within 1 %, harmonics kept > 10 % off."""
+    x = _two_tone(f0)[:, None]
+    shipped = _fit(sliptack_config())
+    paper_peaks = _fit(sliptack_config(harmonics="keep", interpolate=False))
+    assert abs(np.nanmedian(shipped.frequency(x)) - f0) / f0 <= 0.01
+    assert abs(np.nanmedian(paper_peaks.frequency(x)) - f0) / f0 > 0.1
+
+
+@pytest.mark.parametrize("f0", [20.5, 33.33, 57.8])
+def test_interpolation_resolves_below_the_dft_bin(f0: float) -> None:
+    """Between bins (1 Hz at 1000 samples) the interpolated frequency is within 0.2 % of the tone."""
+    t = np.arange(2000) / 1000.0
+    x = (0.3 + 0.05 * np.sin(2 * np.pi * f0 * t))[:, None]
+    f = np.nanmedian(_fit(sliptack_config()).frequency(x))
+    assert abs(f - f0) / f0 <= 0.002
+
+
+def test_shipped_config_meets_the_frequency_targets_on_the_pull_scene() -> None:
+    """sliptack_pull, 6 wood trials (seed 5): |f_d - f_model| <= 1 % mean and <= 3 % worst."""
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+
+    from slipkit import config_dir
+    from slipkit.sim.commands import build_scene
+
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        cfg = compose(
+            config_name="simulate",
+            overrides=["scene=sliptack_pull", "scene.model.materials=[basswood]"],
+        )
+    GlobalHydra.instance().clear()
+    est = _fit(sliptack_config())
+    err = []
+    for tr in build_scene(cfg.scene).simulate(6, seed=5):
+        x = tr.streams["nib"]["deflection"].to_numpy()
+        t = tr.streams["nib"]["t"].to_numpy()
+        f = est.frequency(x[t >= tr.labels["slip_onset_s"]][:, None])
+        f_model = float(est.frequency_from_speed(tr.labels["speed_mm_s"]))
+        err.append(abs(float(np.nanmedian(f)) - f_model) / f_model)
+    assert np.mean(err) <= 0.01
+    assert np.max(err) <= 0.03
+
+
+def test_fixed_normal_force_warns_and_states_the_sensitivity() -> None:
+    """A fixed normal force warns (speed error = force error, 1:1) and records where the force comes from."""
+    with pytest.warns(
+        FixedNormalForceWarning, match="a force 30 % off gives a speed 30 % off"
+    ):
+        est = sliptack_config().fit(np.zeros((1, 1)), np.full(1, np.nan))
+    assert ("value 0.05 N", 1.0) == (est.normal_force_source_, est.speed_per_force_)
+
+
+def test_speed_scales_with_the_input_normal_force_batch_and_stream() -> None:
+    """normal_force=input: speed at 2 Fn is twice the speed at Fn; batch equals streaming."""
+    x = _two_tone(31.3, n=1500)
+    est = _fit(sliptack_config(normal_force="input"), channels=2)
+    assert "input column 1" == est.normal_force_source_
+    lo = est.predict(np.c_[x, np.full(len(x), 0.05)])
+    hi = est.predict(np.c_[x, np.full(len(x), 0.10)])
+    np.testing.assert_allclose(hi, 2.0 * lo, rtol=1e-12)
+    X = np.c_[x, np.linspace(0.04, 0.06, len(x))]
+    state = est.stream()
+    rows = np.array([state.update(row) for row in X])
+    np.testing.assert_array_equal(est.predict(X), rows[:, 1])
+
+
+def test_input_normal_force_needs_the_second_column() -> None:
+    """normal_force=input with one column is refused, naming both channels."""
+    with pytest.raises(ValueError, match="the nib signal and the normal force"):
+        sliptack_config(normal_force="input").fit(np.zeros((5, 1)), np.zeros(5))
