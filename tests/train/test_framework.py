@@ -163,6 +163,53 @@ def test_sweeper_runs_one_folder_per_job(tmp_path: Path) -> None:
     assert 2 == len(cs)
 
 
+def test_sweep_selects_on_validation_and_prints_the_best_run(tmp_path: Path) -> None:
+    """A sweep ranks runs by their validation objective; best.json, the printed lines and
+    the Optuna sweeper's optimization_results.yaml name the same run and value."""
+    import subprocess
+    import sys
+
+    import yaml
+
+    sweep = tmp_path / "multirun"
+    cmd = [
+        sys.executable,
+        "-c",
+        "from slipkit.cli import main; main()",
+        "train",
+        "-m",
+        "experiment=tactip_svm",
+        "hydra/sweeper=optuna",
+        "hydra.sweeper.n_trials=3",
+        "hydra.sweeper.direction=maximize",
+        "hydra.sweeper.sampler.seed=0",
+        "model.C=tag(log,interval(0.01,1000))",
+        "dataset.n_trials=6",
+        "scene.model.n_pins=19",
+        "scene.model.duration_s=1.0",
+        "scene.model.onset_s=[0.4,0.7]",
+        "task.cv=2",
+        f"runs_dir={tmp_path / 'runs'}",
+        f"hydra.sweep.dir={sweep}",
+    ]
+    done = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    assert 0 == done.returncode, done.stderr[-2000:]
+    best = json.loads((sweep / "best.json").read_text())
+    runs = {
+        r: json.loads((r / "run.json").read_text())["objective"]
+        for r in (tmp_path / "runs" / "tactip_svm").iterdir()
+    }
+    assert {"validation.balanced_accuracy"} == {o["name"] for o in runs.values()}
+    assert max(o["value"] for o in runs.values()) == best["objective"]["value"]
+    results = yaml.safe_load((sweep / "optimization_results.yaml").read_text())
+    assert results["best_value"] == best["objective"]["value"]
+    assert results["best_params"]["model.C"] == best["params"]["C"]
+    assert 3 == len(json.loads((sweep / "sweep.json").read_text())["jobs"])
+    lines = done.stdout.splitlines()
+    assert str(sweep / "best.json") == lines[-1]
+    assert any(line.startswith("sweep best (by validation.") for line in lines)
+
+
 def test_selection_record_lists_every_candidate_and_the_best() -> None:
     """The selection record holds each candidate's mean / std and the best of them."""
     from sklearn.linear_model import LogisticRegression

@@ -38,6 +38,7 @@ from slipkit.train.runs import (
     write_config,
     write_json,
 )
+from slipkit.train.sweep import record_job
 from slipkit.train.task import Task, jsonable
 
 log = logging.getLogger("slipkit.train")
@@ -152,6 +153,11 @@ def train_main(cfg: DictConfig) -> float:
             handler.close()
     for line in result.summary:
         print(line)
+    # In a multirun, tell the sweep summary (slipkit.train.sweep) where this run is.
+    record_job(
+        target,
+        {"name": task.objective, "direction": task.direction, "value": objective},
+    )
     print(target)
     return objective
 

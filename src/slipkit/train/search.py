@@ -41,18 +41,21 @@ def _progress(label: str, done: int, total: int, start: float, extra: str = "") 
     elapsed = time.perf_counter() - start
     eta = elapsed / done * (total - done) if done else float("nan")
     line = (
-        f"{label}: {done}/{total} done, {elapsed:.0f} s elapsed, ETA {eta:.0f} s{extra}"
+        f"{label} {done}/{total} done, {elapsed:.0f} s elapsed, ETA {eta:.0f} s{extra}"
     )
     # stderr, not the log: slipkit's log goes to stdout and the run's train.log.
     print(line, file=sys.stderr, flush=True)
 
 
 def _check_groups(groups: np.ndarray, cv: int, unit: str) -> None:
+    from slipkit.data.splits import SplitError
+
     n_groups = len(np.unique(groups))
-    if n_groups < cv:
-        raise ValueError(
-            f"{cv}-fold group CV needs >= {cv} {unit}s on the training side; "
-            f"got {n_groups}"
+    # GroupKFold needs >= 2 folds: one training trial cannot be cross-validated.
+    if n_groups < max(cv, 2):
+        raise SplitError(
+            f"group CV ({cv} fold(s)) needs >= {max(cv, 2)} {unit}s on the training side; "
+            f"got {n_groups} (more trials, or a smaller test side)"
         )
 
 
