@@ -316,6 +316,42 @@ def test_demo_refuses_to_rewrite_a_folder_that_is_not_a_demo(
     assert before == _snapshot(tmp_path)
 
 
+def test_a_demo_output_may_be_rewritten_but_not_with_foreign_files(
+    tmp_path: Path,
+) -> None:
+    """An earlier demo's output (data, compare, exports, report.md) is accepted for overwrite; one extra file makes it foreign."""
+    out = tmp_path / "demo"
+    for sub in ("data", "compare", "exports"):
+        (out / sub).mkdir(parents=True)
+    (out / "report.md").write_text("# slipkit demo: which detector to deploy\n")
+    accepted = _files.check_out_path(out, kind="demo", overwrite=True)
+    (out / "thesis.tex").write_text("mine\n")
+    with pytest.raises(SlipkitError, match="is not a slipkit demo"):
+        _files.check_out_path(out, kind="demo", overwrite=True)
+    assert out == accepted
+
+
+@pytest.mark.slow
+def test_demo_rewrites_its_own_output(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`slipkit demo` run twice into one out (overwrite defaults to true) replaces its own folders."""
+    args = [
+        "demo",
+        f"out={tmp_path / 'demo'}",
+        f"data_root={tmp_path / 'no-real-data'}",
+        "quick=true",
+        "progress=false",
+        "~comparisons",
+        "+comparisons={fsr: []}",
+    ]
+    codes = [_cli(args, capsys)[0] for _ in range(2)]
+    assert ([0, 0], ["compare", "data", "exports", "report.md"]) == (
+        codes,
+        sorted(p.name for p in (tmp_path / "demo").iterdir()),
+    )
+
+
 def test_overwrite_replaces_a_folder_of_the_same_kind(tmp_path: Path) -> None:
     """A dataset replaces a dataset and a bundle a bundle; an empty folder may be filled."""
     ds = save_dataset(make_dataset(n_trials=2, n_frames=20), tmp_path / "ds")
@@ -603,7 +639,9 @@ def umask(request: pytest.FixtureRequest) -> Iterator[int]:
         os.umask(saved)
 
 
-@pytest.mark.parametrize("umask", [0o022, 0o027], indirect=True)
+@pytest.mark.parametrize(
+    "umask", [0o022, 0o027], indirect=True, ids=["umask022", "umask027"]
+)
 def test_written_folders_and_files_follow_the_umask(umask: int, tmp_path: Path) -> None:
     """Datasets, bundles and text files get `0o777 & ~umask` (folders) and `0o666 & ~umask` (files), not 0700/0600."""
     ds = save_dataset(make_dataset(n_trials=2, n_frames=20), tmp_path / "ds")
