@@ -179,3 +179,20 @@ def test_bts3v2_on_the_real_recordings_beats_75_percent(
     ).metrics
     assert m["test"]["accuracy"] >= 0.75
     assert m["majority_control_test"]["accuracy"] < 0.6
+
+
+@pytest.mark.parametrize(
+    "mode", ["none", "per_grasp", "orientation_feature", "per_orientation"]
+)
+def test_grasp_pipeline_exports_to_onnx_with_parity(
+    synthetic: Dataset, mode: str
+) -> None:
+    """Every orientation handling exports through skl2onnx and matches scikit-learn."""
+    from slipkit.export import export
+    from slipkit.export.parity import check_parity
+    from slipkit.train.tasks.grasp import grasp_pipeline
+
+    X, y, _ = GraspStability().arrays(synthetic)
+    pipe = grasp_pipeline(SVC()).set_params(prep__normalise=mode).fit(X[::2], y[::2])
+    report = check_parity(pipe, export(pipe), X[1::2])
+    assert (True, "decision_function") == (report["passed"], export(pipe).score_method)

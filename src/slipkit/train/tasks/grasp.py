@@ -133,6 +133,111 @@ class GraspFeatures(TransformerMixin, BaseEstimator):
         return np.asarray(Z)
 
 
+def _onnx_shape(operator: Any) -> None:
+    """skl2onnx shape calculator: (batch, n_electrodes [+ n_orientations])."""
+    from skl2onnx.common.data_types import FloatTensorType
+
+    op = operator.raw_operator
+    width = int(op.n_electrodes)
+    if op.normalise == "orientation_feature":
+        width += int(op.M_.shape[0])
+    operator.outputs[0].type = FloatTensorType([None, width])
+
+
+def _onnx_convert(scope: Any, operator: Any, container: Any) -> None:
+    """skl2onnx converter: ``(E @ W - O @ M) / (O @ S + 1 - sum(O))`` [, O]."""
+    from onnx import TensorProto
+
+    op = operator.raw_operator
+    n_e, n_o = int(op.n_electrodes), int(op.M_.shape[0])
+    x = operator.inputs[0].full_name
+
+    def name(stem: str) -> str:
+        return str(scope.get_unique_variable_name(stem))
+
+    def const(stem: str, value: np.ndarray, dtype: int = TensorProto.FLOAT) -> str:
+        key = name(stem)
+        arr = np.asarray(value)
+        container.add_initializer(key, dtype, list(arr.shape), arr.ravel().tolist())
+        return key
+
+    def node(kind: str, inputs: list[str], stem: str, **attrs: Any) -> str:
+        out = name(stem)
+        container.add_node(
+            kind, inputs, [out], name=scope.get_unique_operator_name(kind), **attrs
+        )
+        return out
+
+    i64 = TensorProto.INT64
+    axis = const("axis1", np.array([1]), i64)
+    e = node(
+        "Slice",
+        [x, const("s0", np.array([0]), i64), const("e0", np.array([n_e]), i64), axis],
+        "E",
+    )
+    o = node(
+        "Slice",
+        [
+            x,
+            const("s1", np.array([n_e]), i64),
+            const("e1", np.array([n_e + n_o]), i64),
+            axis,
+        ],
+        "O",
+    )
+    num = node(
+        "Sub",
+        [
+            node("MatMul", [e, const("W", op.W_.astype(np.float32))], "EW"),
+            node("MatMul", [o, const("M", op.M_.astype(np.float32))], "OM"),
+        ],
+        "num",
+    )
+    rest = node(
+        "Sub",
+        [
+            const("one", np.array([1.0], dtype=np.float32)),
+            node("ReduceSum", [o, axis], "osum", keepdims=1),
+        ],
+        "rest",
+    )
+    scale = node(
+        "Add",
+        [node("MatMul", [o, const("S", op.S_.astype(np.float32))], "OS"), rest],
+        "scale",
+    )
+    z = node("Div", [num, scale], "Z")
+    out = operator.outputs[0].full_name
+    if op.normalise == "orientation_feature":
+        container.add_node(
+            "Concat",
+            [z, o],
+            [out],
+            name=scope.get_unique_operator_name("Concat"),
+            axis=1,
+        )
+    else:
+        container.add_node(
+            "Identity", [z], [out], name=scope.get_unique_operator_name("Identity")
+        )
+
+
+def _register_onnx() -> None:
+    """Teach skl2onnx :class:`GraspFeatures`, so a grasp Pipeline exports through
+    :func:`slipkit.export.sklearn.export_sklearn` (skl2onnx has no converter for a
+    custom transformer; this one is six MatMul / Sub / Div nodes)."""
+    try:
+        from skl2onnx import update_registered_converter
+    except ImportError:  # a training install without skl2onnx: no export
+        return
+    update_registered_converter(
+        GraspFeatures, "SlipkitGraspFeatures", _onnx_shape, _onnx_convert
+    )
+
+
+_register_onnx()
+
+
 def grasp_pipeline(classifier: Any, *, n_electrodes: int = 72) -> Pipeline:
     """``GraspFeatures -> StandardScaler -> classifier`` (parameters ``prep__*``, ``clf__*``)."""
     return Pipeline(
