@@ -301,6 +301,29 @@ def check_out_path(
     return out
 
 
+def check_out_file(path: Path | str, *, option: str) -> Path:
+    """Refuse a single output file that could destroy data; return it as a Path.
+
+    For options naming one file (``slipkit-run --json``): it may replace an existing
+    file (a summary written again), but not a folder or a symlink, and it must not sit
+    inside a dataset, run or bundle folder (it would break their checksums).
+    """
+    path = Path(path)
+    where = _where(option, path)
+    if path.is_symlink() or path.is_dir():
+        raise SlipkitError(
+            f"{where}: is a folder or a symbolic link; refusing to replace it"
+        )
+    for parent in _resolved(path).parents:
+        pkind = manifest_kind(parent)
+        if pkind is not None:
+            raise SlipkitError(
+                f"{where}: is inside the slipkit {pkind} {parent}; refusing to write "
+                "into it (choose a file outside it)"
+            )
+    return path
+
+
 # -- leftovers of interrupted writes ------------------------------------------------------
 def recover_leftovers(target: Path | str) -> list[Path]:
     """Restore or report what an interrupted :func:`atomic_dir` left beside ``target``.

@@ -628,6 +628,20 @@ def test_writers_refuse_a_target_inside_a_slipkit_folder(lab: dict[str, Path]) -
     assert before == _snapshot(lab["sim"])
 
 
+def test_a_single_output_file_never_lands_inside_a_slipkit_folder(
+    lab: dict[str, Path], tmp_path: Path
+) -> None:
+    """check_out_file (for options naming one file) refuses a dataset's manifest, a folder and a symlink, and accepts a plain file elsewhere."""
+    (tmp_path / "link.json").symlink_to(tmp_path / "elsewhere.json")
+    refused = []
+    for path in (lab["sim"] / "manifest.json", lab["docs"], tmp_path / "link.json"):
+        with pytest.raises(SlipkitError, match="refusing") as exc:
+            _files.check_out_file(path, option="--json")
+        refused.append(str(exc.value).startswith(f"--json={path}: "))
+    summary = _files.check_out_file(tmp_path / "summary.json", option="--json")
+    assert ([True] * 3, tmp_path / "summary.json") == (refused, summary)
+
+
 # -- 5. permissions -------------------------------------------------------------------------
 @pytest.fixture
 def umask(request: pytest.FixtureRequest) -> Iterator[int]:
