@@ -16,6 +16,7 @@ from __future__ import annotations
 import itertools
 import warnings
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -451,3 +452,43 @@ def test_input_normal_force_needs_the_second_column() -> None:
     """normal_force=input with one column is refused, naming both channels."""
     with pytest.raises(ValueError, match="the nib signal and the normal force"):
         sliptack_config(normal_force="input").fit(np.zeros((5, 1)), np.zeros(5))
+
+
+@pytest.mark.parametrize(("source", "bound"), [("input", 2.0), ("value", None)])
+def test_speed_task_with_per_trial_forces(
+    tmp_path: Path, source: str, bound: float | None
+) -> None:
+    """Per-trial normal forces 0.03-0.08 N: the fed force keeps wood within 2 %; a fixed one does not."""
+    import json
+
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+
+    from slipkit import config_dir
+    from slipkit.train.commands import train_main
+
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        cfg = compose(
+            config_name="train",
+            overrides=[
+                "experiment=sliptack_speed",
+                f"run_dir={tmp_path / 'run'}",
+                "dataset.n_trials=8",
+                "scene.model.duration_s=1.2",
+                "scene.model.materials=[basswood]",
+                "scene.model.normal_force_N=[0.03,0.08]",
+                "detector.window=500",
+                "detector.hop=50",
+                f"detector.normal_force={source}",
+            ],
+        )
+    GlobalHydra.instance().clear()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FixedNormalForceWarning)
+        train_main(cfg)
+    metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    err = metrics["test"]["basswood"]["mean_rel_err_pct"]
+    if bound is None:
+        assert err > 5.0
+    else:
+        assert err <= bound

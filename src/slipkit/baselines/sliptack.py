@@ -694,12 +694,20 @@ class StickSlipSpeed(RegressorMixin, BaseEstimator):
         f = np.atleast_1d(np.asarray(f_hz, dtype=np.float64))
         return 1e3 * _invert(f, self.stick_length_m_, self.w0_, self.form)
 
-    def frequency_from_speed(self, v_mm_s: ArrayLike) -> FloatArray:
-        """Eq. 3 with the fitted stick length: frequency (Hz) at speed ``v`` (mm/s)."""
+    def frequency_from_speed(
+        self, v_mm_s: ArrayLike, normal_force_N: float | None = None
+    ) -> FloatArray:
+        """Eq. 3 with the fitted stick length: frequency (Hz) at speed ``v`` (mm/s).
+
+        ``normal_force_N`` (N): the stick length scaled to this normal force (the
+        fitted one is at ``normal_force_N`` of the parameters); None: as fitted."""
         check_is_fitted(self, "stick_length_m_")
         v = 1e-3 * np.asarray(v_mm_s, dtype=np.float64)
+        length = self.stick_length_m_
+        if normal_force_N is not None:
+            length = length * float(normal_force_N) / float(self.normal_force_N)
         with np.errstate(divide="ignore"):
-            return 1.0 / _period(v, self.stick_length_m_, self.w0_, self.form)
+            return 1.0 / _period(v, length, self.w0_, self.form)
 
     def predict(self, X: ArrayLike, *, segments: ArrayLike | None = None) -> FloatArray:
         """Speed per sample (mm/s); NaN in the warm-up, without a peak, or at saturation.

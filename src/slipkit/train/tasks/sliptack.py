@@ -146,7 +146,30 @@ class SlipTackSpeed(Task):
         lag = (int(model.window) - 1) / float(model.rate_hz)
         return np.asarray(t - lag >= _label(trial, self.onset_label))
 
+    def _inputs(self, trial: Trial, x: np.ndarray, model: Any) -> np.ndarray:
+        """The estimator's X for one trial: the nib column, plus the trial's normal force
+        (label ``normal_force_N``, N) when the estimator reads it (``normal_force="input"``)."""
+        if getattr(model, "normal_force", "value") != "input":
+            return x[:, None]
+        return np.c_[x, np.full(len(x), _label(trial, "normal_force_N"))]
+
+    def _check_rate(self, dataset: Dataset, model: Any) -> None:
+        """The estimator's rate_hz must be the stream's (its Nyquist check relies on it)."""
+        spec = dataset.streams.get(self.stream)
+        rate = getattr(spec, "rate_hz", None)
+        if (
+            rate is not None
+            and hasattr(model, "rate_hz")
+            and abs(float(rate) - float(model.rate_hz)) > 1e-6 * float(rate)
+        ):
+            raise SlipkitError(
+                f"stream {self.stream!r} is sampled at {float(rate):g} Hz but the "
+                f"estimator's rate_hz is {float(model.rate_hz):g} Hz; set "
+                f"detector.rate_hz={float(rate):g} (and a window that fits a trial)"
+            )
+
     def _xy(self, dataset: Dataset, model: Any) -> tuple[np.ndarray, ...]:
+        self._check_rate(dataset, model)
         xs, ys, segs = [], [], []
         for i, trial in enumerate(dataset):
             x = _column(trial, self.stream, self.column)
@@ -156,10 +179,10 @@ class SlipTackSpeed(Task):
                     f"trial {trial.trial_id}: {self.truth_stream!r} and {self.stream!r} "
                     "differ in length; the speed task needs them sample-aligned"
                 )
-            xs.append(x)
+            xs.append(self._inputs(trial, x, model))
             ys.append(np.where(self._steady(trial, model), v, np.nan))
             segs.append(np.full(len(x), i))
-        return np.concatenate(xs)[:, None], np.concatenate(ys), np.concatenate(segs)
+        return np.concatenate(xs), np.concatenate(ys), np.concatenate(segs)
 
     def _estimator(self, model: Any, material: str) -> Any:
         est = clone(model)
@@ -183,18 +206,24 @@ class SlipTackSpeed(Task):
 
     def trial_table(self, models: Mapping[str, Any], dataset: Dataset) -> pd.DataFrame:
         """One row per trial: true and estimated speed, dominant and model frequency."""
+        self._check_rate(dataset, models[DEFAULT])
         rows = []
         for trial in dataset:
             material = self._material(trial)
             est = models.get(material, models[DEFAULT])
             x = _column(trial, self.stream, self.column)
             steady = self._steady(trial, est)
-            pred = est.predict(x[:, None])[steady]
+            pred = est.predict(self._inputs(trial, x, est))[steady]
             t = trial.streams[self.stream]["t"].to_numpy()
             pull = x[t >= _label(trial, self.onset_label)]
             f_d = est.segment_frequency(pull)  # the paper: one spectrum per pull
             v = _label(trial, self.speed_label)
-            f_model = float(est.frequency_from_speed(v))
+            fn = (
+                _label(trial, "normal_force_N")
+                if getattr(est, "normal_force", "value") == "input"
+                else None
+            )  # the model curve at the trial's measured force, when the estimator reads it
+            f_model = float(est.frequency_from_speed(v, fn))
             finite = pred[np.isfinite(pred)]
             v_hat = float(np.median(finite)) if len(finite) else float("nan")
             rows.append(
