@@ -158,3 +158,38 @@ def test_compare_entry_without_fixed_threshold_is_skipped_in_evaluate(
     assert "sample ROC" == result.metrics["detectors"]["free"]["threshold_from"]
     metrics = task.evaluate(result.model, ds, out=tmp_path)
     assert "skipped" in metrics["detectors"]["free"]
+
+
+def test_detection_objective_is_a_validation_score_test_labels_cannot_move(
+    tmp_path: Path,
+) -> None:
+    """Moving the test trials' onsets changes the test scores, not the validation objective."""
+    from slipkit.data.dataset import Dataset
+    from slipkit.data.splits import split_by_trial
+
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        cfg = compose(config_name="simulate", overrides=["scene=biotac_lift_slip"])
+    ds = build_scene(cfg.scene).simulate(6, seed=2)
+    test_ids = split_by_trial(ds, test_size=0.5, seed=0).test
+    trials = ds.trials.copy()
+    trials.loc[trials["trial_id"].isin(test_ids), "slip_onset_s"] = 0.05
+    moved = Dataset(
+        sensor=ds.sensor,
+        streams=ds.streams,
+        trials=trials,
+        tables=ds.tables,
+        labels=ds.labels,
+        groups=ds.groups,
+        provenance=ds.provenance,
+        name=ds.name,
+    )
+    task = StreamDetection(stream="truth_force", channels=["fx", "fy"], cv=3)
+    clean = task.fit(ForceDerivative(), ds, seed=0, out=tmp_path).metrics
+    bad = task.fit(ForceDerivative(), moved, seed=0, out=tmp_path).metrics
+    assert ("group-kfold by trial", 3) == (
+        clean["validation"]["cv"],
+        clean["validation"]["k"],
+    )
+    assert clean["test"]["samples"]["auc"] != bad["test"]["samples"]["auc"]
+    assert clean["validation"] == bad["validation"]
+    assert task.objective_value(clean) == task.objective_value(bad)

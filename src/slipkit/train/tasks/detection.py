@@ -200,10 +200,14 @@ class StreamDetection(Task):
         Further detectors: ``{name, detector, stream, channels, unit, paper}``
         (``detector`` an estimator or a ``_target_`` mapping).
     objective : str
-        Metrics key returned to a sweeper (dots descend).
+        Metrics key returned to a sweeper (dots descend): a ``validation.*`` key, the
+        main detector refitted by ``cv``-fold group CV by trial on the training half
+        and scored on the held-out fold (mean over folds), never the test half.
+    cv : int
+        Folds of that validation (fewer when the training half has fewer trials).
     """
 
-    objective = "test.samples.auc"
+    objective = "validation.samples.auc"
     direction = "maximize"
 
     def __init__(
@@ -226,7 +230,8 @@ class StreamDetection(Task):
         unit: str = "",
         paper: Mapping[str, Any] | None = None,
         compare: Sequence[Mapping[str, Any]] | None = None,
-        objective: str = "test.samples.auc",
+        objective: str = "validation.samples.auc",
+        cv: int = 3,
     ) -> None:
         if roc_unit not in ("sample", "event"):
             raise SlipkitError(
@@ -254,6 +259,7 @@ class StreamDetection(Task):
         self.paper = dict(paper or {})
         self.compare = [dict(c) for c in (compare or [])]
         self.objective = objective
+        self.cv = cv
 
     # -- data -------------------------------------------------------------------------
     def _truth(self, trial: Any, column: str) -> tuple[FloatArray, FloatArray]:
@@ -580,6 +586,8 @@ class StreamDetection(Task):
         curves: dict[str, Any] = {}
         tables = []
         for i, e in enumerate(self._entries(model)):
+            if i == 0:  # before the fit: event-ROC fits fix the threshold parameter
+                metrics["validation"] = self.validation(e, train)
             rec_tr = self.recordings(train, e["stream"], e["channels"])
             rec_te = self.recordings(test, e["stream"], e["channels"])
             info = self._fit_one(e["detector"], rec_tr)
@@ -612,6 +620,33 @@ class StreamDetection(Task):
         pd.concat(tables).to_csv(out / "test_trials.csv", index=False)
         _plot_roc(curves, out / "roc.png")
         return TaskResult(model, metrics, self.summary(metrics))
+
+    def validation(self, entry: Mapping[str, Any], train: Dataset) -> dict[str, Any]:
+        """Group CV by trial on the training half: clones of the entry's detector
+        fitted (threshold chosen) on k-1 folds, scored on the held-out fold; every
+        numeric metric averaged over the folds (NaN-aware)."""
+        from sklearn.model_selection import GroupKFold
+
+        ids = np.asarray(train.trial_ids, dtype=object)
+        k = min(int(self.cv), len(ids))
+        if k < 2:
+            raise SlipkitError(
+                f"validation needs >= 2 training trials; the training half has "
+                f"{len(ids)} (raise the number of trials or lower task.test_size)"
+            )
+        folds = []
+        for j, (a, b) in enumerate(GroupKFold(n_splits=k).split(ids, groups=ids)):
+            det = clone(entry["detector"])
+            rec_a = self.recordings(
+                train.subset(ids[a]), entry["stream"], entry["channels"]
+            )
+            rec_b = self.recordings(
+                train.subset(ids[b]), entry["stream"], entry["channels"]
+            )
+            self._fit_one(det, rec_a)
+            folds.append(self.score(det, rec_b)[0])
+            log.info("validation fold %d/%d done", j + 1, k)
+        return {"cv": "group-kfold by trial", "k": k, **_mean_leaves(folds)}
 
     def evaluate(self, model: Any, dataset: Dataset, *, out: Path) -> dict[str, Any]:
         metrics: dict[str, Any] = {"detectors": {}}
@@ -738,3 +773,18 @@ def _plot_roc(curves: Mapping[str, Mapping[str, Any]], path: Path) -> None:
 
 
 __all__ = ["Recordings", "StreamDetection"]
+
+
+def _mean_leaves(dicts: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """Per key, the NaN-aware mean of the numeric leaves of ``dicts`` (same layout)."""
+    out: dict[str, Any] = {}
+    for key, first in dicts[0].items():
+        values = [d.get(key) for d in dicts]
+        if isinstance(first, Mapping):
+            out[key] = _mean_leaves([v for v in values if isinstance(v, Mapping)])
+        elif isinstance(first, int | float) and not isinstance(first, bool):
+            nums = np.asarray(
+                [v for v in values if isinstance(v, int | float)], dtype=float
+            )
+            out[key] = float(np.nanmean(nums)) if np.isfinite(nums).any() else math.nan
+    return out
