@@ -6,7 +6,6 @@ that does not match the graph, tampered files) are in ``tests/runtime/test_bundl
 
 from __future__ import annotations
 
-import json
 import pickle
 from pathlib import Path
 from typing import Any
@@ -32,11 +31,10 @@ def case(tmp_path: Path) -> LinearCase:
 
 
 def _resign(case: LinearCase, name: str) -> None:
-    """Update the manifest's checksum of ``name``, as an attacker or a broken tool might."""
-    path = case.path / "manifest.json"
-    man = json.loads(path.read_text())
-    man["files"][name] = sha256_file(case.path / name)
-    path.write_text(json.dumps(man))
+    """Update the manifest's checksum of ``name`` (and its digest), as an attacker or a
+    broken tool might."""
+    sha = sha256_file(case.path / name)
+    case.edit_manifest(lambda man: man["files"].__setitem__(name, sha))
 
 
 @pytest.mark.parametrize("keep", [0.5, 0.1, 0.0])
@@ -63,7 +61,7 @@ def test_truncated_onnx_with_a_matching_checksum_is_refused_by_onnxruntime(
     data = model.read_bytes()
     model.write_bytes(data[: int(len(data) * keep)])
     _resign(case, "model.onnx")
-    with pytest.raises(BundleError, match="onnxruntime cannot load the graph") as info:
+    with pytest.raises(BundleError, match="onnxruntime refused it") as info:
         load_bundle(case.path)
     assert str(model) == info.value.file
 

@@ -11,6 +11,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from onnx import TensorProto, helper, numpy_helper
 
 from slipkit.runtime import write_bundle
+from slipkit.runtime.bundle import sign_manifest
 
 N_CHANNELS = 3
 WINDOW = 4
@@ -162,12 +163,23 @@ class LinearCase:
             replay=(self.frames, self.timestamps),
         )
 
-    def edit_manifest(self, fn: Any) -> None:
-        """Apply ``fn(manifest_dict)`` to the written manifest.json (to break it)."""
-        path = self.path / "manifest.json"
-        man = json.loads(path.read_text())
-        fn(man)
-        path.write_text(json.dumps(man))
+    def edit_manifest(self, fn: Any, *, resign: bool = True) -> None:
+        """Apply ``fn(manifest_dict)`` to the written manifest.json (to break it).
+
+        With ``resign`` (default) the manifest's digest is recomputed, as a tool that
+        rewrites manifests would, so the edit reaches the field checks behind it.
+        """
+        edit_manifest(self.path, fn, resign=resign)
+
+
+def edit_manifest(bundle: Path, fn: Any, *, resign: bool = True) -> None:
+    """Apply ``fn(manifest_dict)`` to ``bundle/manifest.json``; re-sign it unless told not to."""
+    path = bundle / "manifest.json"
+    man = json.loads(path.read_text())
+    fn(man)
+    if resign and isinstance(man, dict):
+        man = sign_manifest(man)
+    path.write_text(json.dumps(man))
 
 
 def pin_bundle(root: Path, n_pins: int = 4, seed: int = 0) -> Path:

@@ -173,9 +173,13 @@ def test_udp_stream_through_the_cli(generous: LinearCase, tmp_path: Path) -> Non
     assert 0 == proc.returncode, stderr
     summary = json.loads(out.read_text())
     assert (60, 57) == (summary["frames"], summary["decisions"])
-    assert {"received": 60, "rejected": 0, "lost": 0, "last_error": None} == summary[
-        "udp"
-    ]
+    assert {
+        "received": 60,
+        "rejected": 0,
+        "lost": 0,
+        "resyncs": 0,
+        "last_error": None,
+    } == summary["udp"]
     assert "udp: 60 received" in stdout
 
 
@@ -194,4 +198,4 @@ def test_bad_udp_address_exits_2(
     with pytest.raises(SystemExit) as info:
         main([str(generous.path), "--udp", "localhost"])
     assert 2 == info.value.code
-    assert "--udp must be HOST:PORT" in capsys.readouterr().err
+    assert "--udp: must be HOST:PORT" in capsys.readouterr().err

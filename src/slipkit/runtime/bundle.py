@@ -4,20 +4,22 @@ A bundle is everything a gripper PC needs to decide slip from raw sensor frames:
 ONNX graph, the numpy preprocessing the graph does not hold (a closed registry of
 named ops, :mod:`slipkit.runtime.preprocessing`), the decision rule, the debounce, the
 latency budget and the session options. Loading never executes code from the bundle
-(JSON and ONNX only; no pickle anywhere) and checks the manifest's types and the
-sha256 of every listed file before an onnxruntime session is created.
+(JSON and ONNX only; no pickle anywhere) and checks the manifest's own digest, its
+types and bounds, and the sha256 of every listed file before an onnxruntime session
+is created; the graph's first call then runs under a deadline.
 
-Manifest schema, version 1 (every field is described in ``docs/deploy.md``)::
+Manifest schema, version 2 (every field is described in ``docs/deploy.md``)::
 
     {
-      "format": "slipkit-bundle", "schema_version": 1, "name": "tactip_svm",
+      "format": "slipkit-bundle", "schema_version": 2, "name": "tactip_svm",
       "description": "optional free text",
       "frame": {"streams": ["pins"], "channels": ["x0", ..., "y126"], "shape": [254],
                 "window": 2, "hop": 1, "rate_hz": 120.0},
       "preprocessing": [{"op": "pin_velocity_features", "variant": "dr_dtheta"},
                         {"op": "standardize", "mean": [...], "scale": [...]}],
       "inputs": [{"name": "X", "dtype": "float32", "shape": [1, 254]}],
-      "outputs": [{"name": "label"}, {"name": "score", "dtype": "float32"}],
+      "outputs": [{"name": "label"},
+                  {"name": "score", "dtype": "float32", "shape": [1, 1]}],
       "decision": {"output": "score", "rule": "threshold", "column": 0,
                    "classes": ["static", "slip"], "positive": "slip",
                    "strict": false},
@@ -30,8 +32,17 @@ Manifest schema, version 1 (every field is described in ``docs/deploy.md``)::
       "opset": 17,
       "producer": {"slipkit": "0.1.0", "onnx": "1.23.2", "skl2onnx": "1.19.1"},
       "training": {"data_fingerprint": "…", "metrics": {"test": {"f1": 0.97}}},
-      "files": {"model.onnx": "<sha256 hex>", "replay.npz": "<sha256 hex>"}
+      "files": {"model.onnx": "<sha256 hex>", "replay.npz": "<sha256 hex>"},
+      "manifest_sha256": "<sha256 hex of the canonical manifest>"
     }
+
+Version 2 added ``manifest_sha256`` (:func:`manifest_digest`: the sha256 of the
+manifest without that field, as JSON with sorted keys and no whitespace), bounds on
+every number (:mod:`slipkit.runtime._schema`, ``MAX_*``), and output ``shape``
+entries that may be ``null`` (a symbolic dimension); :func:`write_bundle` records the
+dtype and shape of every listed output from the graph. The digest catches an edited
+or damaged manifest (a loosened budget, a changed threshold); it is a checksum, not a
+signature: whoever can write the folder can recompute it.
 """
 
 from __future__ import annotations
@@ -39,6 +50,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import threading
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -48,15 +60,33 @@ import numpy as np
 import onnxruntime as ort
 
 from slipkit._files import atomic_dir, recover_leftovers, sha256_bytes, sha256_file
-from slipkit.runtime._schema import Fields
+from slipkit.runtime._schema import (
+    MAX_DEBOUNCE_K,
+    MAX_FRAME_PERIOD_MS,
+    MAX_FRAMES,
+    MAX_JSON_DEPTH,
+    MAX_MANIFEST_BYTES,
+    MAX_MODEL_BYTES,
+    MAX_OPSET,
+    MAX_RATE_HZ,
+    MAX_VALUES,
+    Fields,
+    json_depth,
+)
 from slipkit.runtime.errors import BundleError
 from slipkit.runtime.preprocessing import Pipeline
-from slipkit.runtime.session import SessionSpec, make_session
+from slipkit.runtime.session import ORT_ERRORS, SessionSpec, make_session
 
 FORMAT = "slipkit-bundle"
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 MODEL_FILE = "model.onnx"
 MANIFEST_FILE = "manifest.json"
+#: The manifest field holding :func:`manifest_digest` of the rest of the manifest.
+DIGEST_FIELD = "manifest_sha256"
+#: Seconds the graph's first call (at load) may take before the load is refused.
+DEFAULT_DEADLINE_S = 5.0
+#: Longest load deadline accepted, s.
+MAX_DEADLINE_S = 3600.0
 #: Recorded frames an exporter may add for ``slipkit-run <bundle>`` and session tuning.
 REPLAY_FILE = "replay.npz"
 
@@ -78,11 +108,22 @@ TOP_FIELDS = (
     "producer",
     "training",
     "files",
+    DIGEST_FIELD,
 )
 #: Graph input dtypes the loop can feed (ONNX type string -> manifest name).
 INPUT_DTYPES = {"tensor(float)": "float32", "tensor(double)": "float64"}
 #: ONNX type strings of outputs the decision can read.
 SCORE_DTYPES = {"tensor(float)": "float32", "tensor(double)": "float64"}
+#: ONNX tensor element type -> manifest dtype name (numpy's), for the output check.
+ONNX_DTYPES = {
+    "float": "float32",
+    "double": "float64",
+    "float16": "float16",
+    "bool": "bool",
+    "string": "string",
+    **{t: t for t in ("int8", "int16", "int32", "int64")},
+    **{t: t for t in ("uint8", "uint16", "uint32", "uint64")},
+}
 _SHA256 = re.compile(r"^[0-9a-f]{64}$")
 _FILE_NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
 
@@ -122,11 +163,54 @@ class FrameSpec:
 
 @dataclass(frozen=True)
 class TensorSpec:
-    """A graph input or output: name, dtype (``float32``...) and shape (None: unchecked)."""
+    """A graph input or output: name, dtype (``float32``...) and shape (None: unchecked).
+
+    An output's shape may hold None for a symbolic dimension; an input's never does.
+    """
 
     name: str
     dtype: str | None
-    shape: tuple[int, ...] | None
+    shape: tuple[int | None, ...] | None
+
+    @property
+    def static_shape(self) -> tuple[int, ...]:
+        """The shape with every dimension known (an input's, checked at validation)."""
+        if self.shape is None or any(d is None for d in self.shape):
+            raise ValueError(f"tensor {self.name!r} has no static shape: {self.shape}")
+        return tuple(int(d) for d in self.shape if d is not None)
+
+
+def onnx_dtype(type_str: str) -> str:
+    """The manifest dtype of an onnxruntime type string (``tensor(float)`` -> ``float32``).
+
+    A non-tensor type (``seq(map(int64,tensor(float)))``) is returned unchanged.
+    """
+    if type_str.startswith("tensor(") and type_str.endswith(")"):
+        elem = type_str[len("tensor(") : -1]
+        return ONNX_DTYPES.get(elem, elem)
+    return type_str
+
+
+def manifest_digest(manifest: Mapping[str, Any]) -> str:
+    """sha256 hex of a manifest's canonical JSON, without its ``manifest_sha256`` field.
+
+    Canonical: sorted keys, no whitespace, ASCII escapes (a NaN is written ``NaN``;
+    :func:`validate_manifest` refuses it), so the digest depends on the decoded
+    values only, not on how the file was indented.
+
+    Raises
+    ------
+    ValueError
+        A value JSON cannot hold.
+    """
+    body = {k: v for k, v in manifest.items() if k != DIGEST_FIELD}
+    text = json.dumps(body, sort_keys=True, separators=(",", ":"))
+    return sha256_bytes(text.encode("ascii"))
+
+
+def sign_manifest(manifest: Mapping[str, Any]) -> dict[str, Any]:
+    """A copy of ``manifest`` with ``manifest_sha256`` set to :func:`manifest_digest`."""
+    return {**manifest, DIGEST_FIELD: manifest_digest(manifest)}
 
 
 @dataclass(frozen=True)
@@ -229,10 +313,48 @@ class Manifest:
     raw: dict[str, Any]
 
 
+def _output_shape(f: Fields) -> tuple[int | None, ...]:
+    """An output's shape: a list of dims in [1, MAX_VALUES] or null (symbolic)."""
+    value = f.raw("shape")
+    if (
+        not isinstance(value, list)
+        or len(value) > 32
+        or not all(
+            v is None
+            or (isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= MAX_VALUES)
+            for v in value
+        )
+    ):
+        raise f.error(
+            "shape",
+            f"must be a list of at most 32 dims, each an integer in [1, {MAX_VALUES}] "
+            "or null (symbolic)",
+        )
+    return tuple(value)
+
+
+def _first_nonfinite(obj: dict[str, Any]) -> str | None:
+    """Dotted path of the first NaN or infinity in a decoded manifest, or None."""
+    stack: list[tuple[Any, str]] = [(obj, "")]
+    while stack:
+        value, path = stack.pop()
+        if isinstance(value, float) and not math.isfinite(value):
+            return path
+        if isinstance(value, dict):
+            stack.extend(
+                (v, f"{path}.{k}" if path else str(k)) for k, v in value.items()
+            )
+        elif isinstance(value, list):
+            stack.extend((v, f"{path}[{i}]") for i, v in enumerate(value))
+    return None
+
+
 def _tensors(top: Fields, key: str, *, need_shape: bool) -> tuple[TensorSpec, ...]:
     value = top.raw(key)
     if not isinstance(value, list) or not value:
         raise top.error(key, "must be a non-empty list of {name, dtype, shape} objects")
+    if len(value) > 64:
+        raise top.error(key, f"lists {len(value)} tensors; at most 64")
     specs = []
     for i, item in enumerate(value):
         f = Fields(top.file, item, f"{key}[{i}]")
@@ -240,7 +362,11 @@ def _tensors(top: Fields, key: str, *, need_shape: bool) -> tuple[TensorSpec, ..
         dtype = f.raw("dtype", None)
         if dtype is not None:
             dtype = f.string("dtype")
-        shape = f.integers("shape") if need_shape or "shape" in f.obj else None
+        shape: tuple[int | None, ...] | None = None
+        if need_shape:  # an input: static dims only
+            shape = f.integers("shape", max_product=MAX_VALUES)
+        elif "shape" in f.obj:
+            shape = _output_shape(f)
         specs.append(TensorSpec(f.string("name"), dtype, shape))
     names = [s.name for s in specs]
     if len(set(names)) != len(names):
@@ -253,11 +379,17 @@ def _frame(f: Fields) -> FrameSpec:
     spec = FrameSpec(
         streams=f.strings("streams"),
         channels=f.strings("channels", unique=True),
-        shape=f.integers("shape"),
-        window=f.integer("window", minimum=1),
-        hop=f.integer("hop", 1, minimum=1),
-        rate_hz=f.number("rate_hz", positive=True),
+        shape=f.integers("shape", max_product=MAX_VALUES),
+        window=f.integer("window", minimum=1, maximum=MAX_FRAMES),
+        hop=f.integer("hop", 1, minimum=1, maximum=MAX_FRAMES),
+        rate_hz=f.number("rate_hz", positive=True, maximum=MAX_RATE_HZ),
     )
+    if spec.window * spec.n_values > MAX_VALUES:
+        raise f.error(
+            "window",
+            f"{spec.window} frames of {spec.n_values} values exceed the {MAX_VALUES} "
+            "values a window may hold",
+        )
     if spec.n_values != len(spec.channels):
         raise f.error(
             "channels",
@@ -296,7 +428,7 @@ def _decision(top: Fields, outputs: tuple[TensorSpec, ...]) -> DecisionSpec:
         if "strict" in f.obj:
             raise f.error("strict", "is not used by the argmax rule")
     else:
-        column = f.integer("column", 0, minimum=0)
+        column = f.integer("column", 0, minimum=0, maximum=MAX_VALUES - 1)
         if classes is not None and len(classes) != 2:
             raise f.error(
                 "classes",
@@ -308,7 +440,7 @@ def _decision(top: Fields, outputs: tuple[TensorSpec, ...]) -> DecisionSpec:
 
 
 def validate_manifest(obj: object, file: str = MANIFEST_FILE) -> Manifest:
-    """Check a decoded manifest against schema version 1.
+    """Check a decoded manifest against schema version 2 (types, bounds, cross-field rules).
 
     Parameters
     ----------
@@ -328,8 +460,18 @@ def validate_manifest(obj: object, file: str = MANIFEST_FILE) -> Manifest:
     ------
     BundleError
         Naming ``file`` and the field at fault.
+
+    Notes
+    -----
+    ``manifest_sha256`` is only type-checked here (64 lower-case hex digits);
+    :func:`load_bundle` requires it and compares it with :func:`manifest_digest`.
     """
     top = Fields(file, obj)
+    depth = json_depth(obj)
+    if depth > MAX_JSON_DEPTH:
+        raise top.error(
+            None, f"is nested {depth} levels deep; at most {MAX_JSON_DEPTH}"
+        )
     fmt = top.raw("format")
     if fmt != FORMAT:
         raise top.error(
@@ -340,7 +482,8 @@ def validate_manifest(obj: object, file: str = MANIFEST_FILE) -> Manifest:
         raise top.error(
             "schema_version",
             f"this runtime reads version {SCHEMA_VERSION}; got {version} "
-            "(install the slipkit version that wrote the bundle)",
+            "(re-export the bundle with this slipkit, or install the slipkit version "
+            "that wrote it)",
         )
     top.only(TOP_FIELDS)
     name = top.string("name")
@@ -367,8 +510,8 @@ def validate_manifest(obj: object, file: str = MANIFEST_FILE) -> Manifest:
     budget_f = top.child("budget_ms")
     budget_f.only(("frame_period", "p99"))
     budget = Budget(
-        budget_f.number("frame_period", positive=True),
-        budget_f.number("p99", positive=True),
+        budget_f.number("frame_period", positive=True, maximum=MAX_FRAME_PERIOD_MS),
+        budget_f.number("p99", positive=True, maximum=MAX_FRAME_PERIOD_MS),
     )
     if budget.p99_ms > budget.frame_period_ms:
         raise budget_f.error(
@@ -376,7 +519,7 @@ def validate_manifest(obj: object, file: str = MANIFEST_FILE) -> Manifest:
             f"must not exceed the frame period ({budget.frame_period_ms} ms); got {budget.p99_ms}",
         )
     session = SessionSpec.from_fields(top.child("session", {}))
-    opset = top.integer("opset", minimum=1)
+    opset = top.integer("opset", minimum=1, maximum=MAX_OPSET)
     prod = top.child("producer")
     producer = {k: prod.string(k) for k in prod.obj}
     training = top.child("training", {})
@@ -401,6 +544,18 @@ def validate_manifest(obj: object, file: str = MANIFEST_FILE) -> Manifest:
         raise files_f.error(
             MODEL_FILE, "is missing (required): the sha256 of the graph"
         )
+    nonfinite = _first_nonfinite(top.obj)
+    if nonfinite is not None:
+        raise top.error(
+            nonfinite, "holds NaN or an infinity; a manifest is strict JSON"
+        )
+    if DIGEST_FIELD in top.obj:
+        digest = top.string(DIGEST_FIELD)
+        if not _SHA256.match(digest):
+            raise top.error(
+                DIGEST_FIELD,
+                f"must be a 64-digit lower-case sha256 hex; got {digest!r}",
+            )
     return Manifest(
         name=name,
         frame=frame,
@@ -408,7 +563,7 @@ def validate_manifest(obj: object, file: str = MANIFEST_FILE) -> Manifest:
         inputs=inputs,
         outputs=outputs,
         decision=decision,
-        debounce_k=deb.integer("k", minimum=1),
+        debounce_k=deb.integer("k", minimum=1, maximum=MAX_DEBOUNCE_K),
         budget=budget,
         session=session,
         opset=opset,
@@ -437,6 +592,9 @@ class Bundle:
         The options ``session`` was built with.
     preprocessing : Pipeline
         The compiled preprocessing for ``(window, *frame.shape)``.
+    deadline_s : float
+        The load deadline, s: the graph's first call had to end within it, and the
+        loop's warm-up stops once it has taken that long.
     """
 
     path: Path
@@ -445,6 +603,7 @@ class Bundle:
     session: ort.InferenceSession
     session_spec: SessionSpec
     preprocessing: Pipeline
+    deadline_s: float = DEFAULT_DEADLINE_S
 
     @property
     def replay_path(self) -> Path | None:
@@ -453,7 +612,65 @@ class Bundle:
 
     def with_session(self, spec: SessionSpec) -> Bundle:
         """The same bundle with a new session built from ``spec``."""
-        return replace(self, session=make_session(self.model, spec), session_spec=spec)
+        sess = _session(self.model, spec, str(self.path / MODEL_FILE))
+        return replace(self, session=sess, session_spec=spec)
+
+
+def _one_line(exc: BaseException) -> str:
+    """An exception's message on one line (onnxruntime's span several)."""
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+def _session(model: bytes, spec: SessionSpec, model_file: str) -> ort.InferenceSession:
+    """:func:`make_session`, with onnxruntime's own errors as a BundleError."""
+    try:
+        return make_session(model, spec)
+    except ORT_ERRORS as exc:
+        raise BundleError(
+            model_file, None, f"onnxruntime refused it: {_one_line(exc)}"
+        ) from None
+
+
+def run_with_deadline(
+    session: ort.InferenceSession,
+    outputs: list[str] | None,
+    feed: dict[str, Any],
+    deadline_s: float,
+    model_file: str,
+) -> list[Any]:
+    """One ``session.run`` that is stopped after ``deadline_s`` seconds.
+
+    A timer thread sets onnxruntime's ``RunOptions.terminate`` flag at the deadline,
+    which makes the running call (a Loop node included) return with an error; no
+    thread is left behind. Used for the graph's first call when a bundle loads, so
+    a graph that would run for hours (a Loop of 1e12 iterations) is refused instead.
+
+    Raises
+    ------
+    BundleError
+        Naming ``model_file``: the call did not end in time, or onnxruntime raised.
+    """
+    options = ort.RunOptions()
+    options.log_severity_level = 4  # the error is raised and reported by us
+    timer = threading.Timer(deadline_s, setattr, (options, "terminate", True))
+    timer.daemon = True
+    timer.start()
+    try:
+        return list(session.run(outputs, feed, options))
+    except ORT_ERRORS as exc:
+        if options.terminate:
+            raise BundleError(
+                model_file,
+                None,
+                f"onnxruntime did not finish the graph's first call within the "
+                f"{deadline_s:g} s load deadline (a graph that never ends, such as a "
+                "Loop of 1e12 iterations, or a deadline too short for this machine)",
+            ) from None
+        raise BundleError(
+            model_file, None, f"onnxruntime refused it: {_one_line(exc)}"
+        ) from None
+    finally:
+        timer.cancel()
 
 
 def _check_graph(
@@ -496,6 +713,23 @@ def _check_graph(
                 f"outputs[{i}].name",
                 f"{out.name!r} is not a graph output; the graph has {sorted(graph_outputs)}",
             )
+        g = graph_outputs[out.name]
+        if out.dtype is not None and onnx_dtype(g.type) != out.dtype:
+            raise top.error(
+                f"outputs[{i}].dtype",
+                f"is {out.dtype!r} but the graph's output {out.name!r} is {g.type}",
+            )
+        if out.shape is not None:
+            gdims = [d if isinstance(d, int) else None for d in (g.shape or [])]
+            if len(gdims) != len(out.shape) or any(
+                a is not None and b is not None and a != b
+                for a, b in zip(gdims, out.shape, strict=False)
+            ):
+                raise top.error(
+                    f"outputs[{i}].shape",
+                    f"is {list(out.shape)} but the graph's output {out.name!r} has "
+                    f"shape {g.shape}",
+                )
     score = graph_outputs[manifest.decision.output]
     if score.type not in SCORE_DTYPES:
         raise top.error(
@@ -505,16 +739,40 @@ def _check_graph(
 
 
 def _check_decision_size(
-    manifest: Manifest, session: ort.InferenceSession, manifest_file: str
+    manifest: Manifest,
+    session: ort.InferenceSession,
+    manifest_file: str,
+    model_file: str,
+    deadline_s: float,
 ) -> None:
-    """One call on a zero input: the score output must have the entries the rule reads."""
+    """One call on a zero input, under the deadline: the score output must have the
+    shape the manifest gives and the entries the rule reads."""
     (inp,) = manifest.inputs
-    assert inp.shape is not None
-    x = np.zeros(inp.shape, dtype=np.dtype(inp.dtype))
-    (score,) = session.run([manifest.decision.output], {inp.name: x})
-    size = int(np.asarray(score).size)
+    x = np.zeros(inp.static_shape, dtype=np.dtype(inp.dtype))
+    (score,) = run_with_deadline(
+        session, [manifest.decision.output], {inp.name: x}, deadline_s, model_file
+    )
+    score = np.asarray(score)
+    size = int(score.size)
     top = Fields(manifest_file, manifest.raw)
     d = manifest.decision
+    for i, out in enumerate(manifest.outputs):
+        if (
+            out.name == d.output
+            and out.shape is not None
+            and (
+                len(out.shape) != score.ndim
+                or any(
+                    w is not None and w != g
+                    for w, g in zip(out.shape, score.shape, strict=False)
+                )
+            )
+        ):
+            raise top.error(
+                f"outputs[{i}].shape",
+                f"is {list(out.shape)} but the graph's first call gave "
+                f"{list(score.shape)}",
+            )
     if d.rule == "argmax" and d.classes is not None and size != len(d.classes):
         raise top.error(
             "decision.classes",
@@ -527,16 +785,80 @@ def _check_decision_size(
         )
 
 
-def load_bundle(path: str | Path, *, session: SessionSpec | None = None) -> Bundle:
+def _read_manifest(manifest_path: Path) -> Any:
+    """The decoded manifest.json: size-capped, strict JSON (no NaN), depth-capped."""
+    mfile = str(manifest_path)
+    try:
+        size = manifest_path.stat().st_size
+        if size > MAX_MANIFEST_BYTES:
+            raise BundleError(
+                mfile, None, f"is {size} bytes; at most {MAX_MANIFEST_BYTES} are read"
+            )
+        data = manifest_path.read_bytes()
+    except OSError as exc:
+        raise BundleError(
+            mfile, None, f"cannot be read: {exc.strerror or exc}"
+        ) from None
+
+    try:
+        # NaN / Infinity are parsed here and refused by validate_manifest, which can
+        # name the field that holds them.
+        obj = json.loads(data.decode("utf-8"))
+    except RecursionError:
+        raise BundleError(
+            mfile,
+            None,
+            f"is not valid JSON: nested deeper than {MAX_JSON_DEPTH} levels",
+        ) from None
+    except (UnicodeDecodeError, ValueError) as exc:  # JSONDecodeError is a ValueError
+        raise BundleError(mfile, None, f"is not valid JSON: {_one_line(exc)}") from None
+    depth = json_depth(obj)
+    if depth > MAX_JSON_DEPTH:
+        raise BundleError(
+            mfile, None, f"is nested {depth} levels deep; at most {MAX_JSON_DEPTH}"
+        )
+    return obj
+
+
+def _check_digest(obj: Any, mfile: str) -> None:
+    """Compare ``manifest_sha256`` with the manifest's content (this schema version only:
+    an older or foreign manifest is named by :func:`validate_manifest` instead)."""
+    if not (
+        isinstance(obj, dict)
+        and obj.get("format") == FORMAT
+        and obj.get("schema_version") == SCHEMA_VERSION
+    ):
+        return
+    top = Fields(mfile, obj)
+    given = top.string(DIGEST_FIELD)
+    actual = manifest_digest(obj)
+    if given != actual:
+        raise top.error(
+            DIGEST_FIELD,
+            f"is {given[:16]}... but the manifest's content has sha256 {actual[:16]}...: "
+            "manifest.json was edited or damaged after the bundle was written; "
+            "re-export it",
+        )
+
+
+def load_bundle(
+    path: str | Path,
+    *,
+    session: SessionSpec | None = None,
+    deadline_s: float = DEFAULT_DEADLINE_S,
+) -> Bundle:
     """Load and check a bundle folder, then build its onnxruntime session.
 
-    Order of checks: the folder and ``manifest.json`` exist; the manifest is JSON
-    and matches schema version 1 (types, ranges, cross-field rules); every file in
+    Order of checks: the folder and ``manifest.json`` exist; the manifest is strict
+    JSON of bounded size and depth, its ``manifest_sha256`` matches its content, and
+    it matches schema version 2 (types, bounds, cross-field rules); every file in
     ``files`` exists and has the listed sha256 (``model.onnx`` always); only then is
     the graph given to onnxruntime; its input/output names, dtypes and static
     shapes must match the manifest, the preprocessing must produce exactly the
-    input's number of values, and the score output must have the entries the
-    decision rule reads.
+    input's number of values, and the graph's first call (on a zero input, stopped
+    after ``deadline_s``) must give the score shape and entries the decision rule
+    reads. onnxruntime's own errors become a :class:`BundleError` naming
+    ``model.onnx``.
 
     Parameters
     ----------
@@ -544,6 +866,8 @@ def load_bundle(path: str | Path, *, session: SessionSpec | None = None) -> Bund
         The bundle folder (``exports/<name>``).
     session : SessionSpec, optional
         Session options to use instead of the manifest's (for tuning).
+    deadline_s : float
+        Seconds the graph's first call may take (default 5; in (0, 3600]).
 
     Returns
     -------
@@ -566,10 +890,14 @@ def load_bundle(path: str | Path, *, session: SessionSpec | None = None) -> Bund
         )
     if not manifest_path.is_file():
         raise BundleError(mfile, None, "is missing: every bundle has a manifest.json")
-    try:
-        obj = json.loads(manifest_path.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise BundleError(mfile, None, f"is not valid JSON: {exc}") from None
+    if not (isinstance(deadline_s, int | float) and 0 < deadline_s <= MAX_DEADLINE_S):
+        raise BundleError(
+            str(root / MODEL_FILE),
+            None,
+            f"load deadline must be in (0, {MAX_DEADLINE_S:g}] s; got {deadline_s!r}",
+        )
+    obj = _read_manifest(manifest_path)
+    _check_digest(obj, mfile)
     manifest = validate_manifest(obj, mfile)
     model = b""
     for fname, digest in manifest.files.items():
@@ -580,11 +908,21 @@ def load_bundle(path: str | Path, *, session: SessionSpec | None = None) -> Bund
                 None,
                 f"is missing but listed in {MANIFEST_FILE} field 'files.{fname}'",
             )
-        if fname == MODEL_FILE:
-            model = fpath.read_bytes()
-            actual = sha256_bytes(model)
-        else:
-            actual = sha256_file(fpath)
+        try:
+            if fname == MODEL_FILE:
+                size = fpath.stat().st_size
+                if size > MAX_MODEL_BYTES:
+                    raise BundleError(
+                        str(fpath), None, f"is {size} bytes; at most {MAX_MODEL_BYTES}"
+                    )
+                model = fpath.read_bytes()
+                actual = sha256_bytes(model)
+            else:
+                actual = sha256_file(fpath)
+        except OSError as exc:
+            raise BundleError(
+                str(fpath), None, f"cannot be read: {exc.strerror or exc}"
+            ) from None
         if actual != digest:
             raise BundleError(
                 str(fpath),
@@ -594,26 +932,21 @@ def load_bundle(path: str | Path, *, session: SessionSpec | None = None) -> Bund
             )
     spec = manifest.session if session is None else session
     model_file = str(root / MODEL_FILE)
-    try:
-        sess = make_session(model, spec)
-    except Exception as exc:  # onnxruntime raises its own exception types
-        raise BundleError(
-            model_file, None, f"onnxruntime cannot load the graph: {exc}"
-        ) from None
+    sess = _session(model, spec, model_file)
     _check_graph(manifest, sess, model_file, mfile)
     window_shape = (manifest.frame.window, *manifest.frame.shape)
     pipeline = Pipeline(manifest.preprocessing, window_shape, mfile)
     (inp,) = manifest.inputs
-    assert inp.shape is not None
-    if math.prod(pipeline.out_shape) != math.prod(inp.shape):
+    in_shape = inp.static_shape
+    if math.prod(pipeline.out_shape) != math.prod(in_shape):
         raise BundleError(
             mfile,
             "inputs[0].shape",
-            f"{list(inp.shape)} holds {math.prod(inp.shape)} values but the window "
+            f"{list(in_shape)} holds {math.prod(in_shape)} values but the window "
             f"{list(window_shape)} after preprocessing has shape {list(pipeline.out_shape)}",
         )
-    _check_decision_size(manifest, sess, mfile)
-    return Bundle(root, manifest, model, sess, spec, pipeline)
+    _check_decision_size(manifest, sess, mfile, model_file, float(deadline_s))
+    return Bundle(root, manifest, model, sess, spec, pipeline, float(deadline_s))
 
 
 def _jsonable(value: Any) -> Any:
@@ -623,6 +956,31 @@ def _jsonable(value: Any) -> Any:
     if isinstance(value, np.generic):
         return value.item()
     raise TypeError(f"{type(value).__name__} is not JSON serialisable")
+
+
+def _describe_outputs(outputs: Any, model: bytes, model_file: str) -> Any:
+    """The manifest's ``outputs`` with each one's dtype and shape filled in from the graph.
+
+    Entries that are not ``{name: ...}`` objects, or name no graph output, are left
+    as they are for :func:`validate_manifest` and :func:`load_bundle` to name.
+    """
+    if not isinstance(outputs, list):
+        return outputs
+    graph = {
+        o.name: o for o in _session(model, SessionSpec(), model_file).get_outputs()
+    }
+    out = []
+    for item in outputs:
+        if isinstance(item, Mapping) and item.get("name") in graph:
+            g = graph[item["name"]]
+            item = dict(item)
+            item.setdefault("dtype", onnx_dtype(g.type))
+            if g.shape is not None and "shape" not in item:
+                item["shape"] = [
+                    d if isinstance(d, int) and d > 0 else None for d in g.shape
+                ]
+        out.append(item)
+    return out
 
 
 def write_bundle(
@@ -642,15 +1000,17 @@ def write_bundle(
     model : bytes
         The serialised ONNX graph (``model.SerializeToString()``).
     manifest : mapping
-        The manifest without ``files`` (computed here); ``format`` and
-        ``schema_version`` are filled in when absent. numpy arrays and scalars
-        are written as JSON lists and numbers.
+        The manifest without ``files`` and ``manifest_sha256`` (computed here);
+        ``format`` and ``schema_version`` are filled in when absent, and so are
+        each listed output's ``dtype`` and ``shape`` (read from the graph; a
+        symbolic dimension is ``null``). numpy arrays and scalars are written as
+        JSON lists and numbers.
     replay : (frames, timestamps), optional
         Recorded frames ``(n, *frame.shape)`` and their times ``(n,)`` in s, written
         as ``replay.npz`` for ``slipkit-run <bundle>`` and session tuning.
     overwrite : bool
         Replace an existing bundle folder (only a bundle: any other folder or file
-        under ``out`` is refused, as is an ``out`` inside a slipkit folder).
+        under out is refused, as is an out inside a slipkit folder).
 
     Returns
     -------
@@ -676,6 +1036,10 @@ def write_bundle(
     man.setdefault("format", FORMAT)
     man.setdefault("schema_version", SCHEMA_VERSION)
     man["files"] = {MODEL_FILE: sha256_bytes(model)}
+    man.pop(DIGEST_FIELD, None)
+    man["outputs"] = _describe_outputs(
+        man.get("outputs"), model, str(target / MODEL_FILE)
+    )
     try:
         # A JSON round trip first: the manifest is checked exactly as it will be read.
         man = json.loads(json.dumps(man, default=_jsonable, allow_nan=False))
@@ -695,6 +1059,8 @@ def write_bundle(
             )
             np.savez(tmp / REPLAY_FILE, frames=frames, timestamps=times)
             man["files"][REPLAY_FILE] = sha256_file(tmp / REPLAY_FILE)
+        # The digest last, over the final content (files included).
+        man = sign_manifest(man)
         text = json.dumps(man, indent=2) + "\n"
         (tmp / MANIFEST_FILE).write_text(text, encoding="utf-8")
         load_bundle(tmp)  # the graph, its IO and the preprocessing, before the rename

@@ -8,8 +8,10 @@ Usage::
     slipkit-run exports/tactip_svm --choose-session      # measure session options
 
 Exit status: 0 success; 1 ``--check`` failed (p99 over the manifest's budget, or no
-decision was made); 2 a bad bundle, replay file or argument (one-line message naming
-the file and field). argparse, not Hydra: a gripper PC has numpy and onnxruntime only.
+decision was made); 2 a bad bundle, replay file or argument: one line on stderr,
+``slipkit-run: error: ...``, naming the file and field or the option. Every deliberate
+error is a :class:`~slipkit.errors.SlipkitError`; any other exception is a bug and
+keeps its traceback. argparse, not Hydra: a gripper PC has numpy and onnxruntime only.
 """
 
 from __future__ import annotations
@@ -22,16 +24,37 @@ from pathlib import Path
 from typing import Any
 
 from slipkit._files import atomic_write_text
-from slipkit.runtime.bundle import Bundle, load_bundle
-from slipkit.runtime.errors import BundleError, FrameError
+from slipkit.errors import SlipkitError
+from slipkit.runtime.bundle import (
+    DEFAULT_DEADLINE_S,
+    MAX_DEADLINE_S,
+    Bundle,
+    load_bundle,
+)
+from slipkit.runtime.errors import FrameError, OptionError
 from slipkit.runtime.loop import StreamLoop
 from slipkit.runtime.modules import heavy_modules_loaded
-from slipkit.runtime.sources import ReplaySource, UdpSource, load_replay
-from slipkit.runtime.tuning import choose_session
+from slipkit.runtime.sources import (
+    MAX_RESYNC_AFTER,
+    MAX_TIMEOUT_S,
+    RESYNC_AFTER,
+    ReplaySource,
+    UdpSource,
+    load_replay,
+)
+from slipkit.runtime.tuning import MAX_ROUNDS, choose_session
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with its usage errors as one line (``slipkit-run: error: ...``), exit 2."""
+
+    def error(self, message: str) -> Any:  # argparse's hook; never returns
+        print(f"{self.prog}: error: {' '.join(message.split())}", file=sys.stderr)
+        raise SystemExit(2)
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = _Parser(
         prog="slipkit-run",
         description="Run a slipkit ONNX bundle's decision loop frame by frame and report "
         "per-frame latency (frame arrival -> decision) against the bundle's budget.",
@@ -61,7 +84,24 @@ def _parser() -> argparse.ArgumentParser:
         type=float,
         default=2.0,
         metavar="S",
-        help="UDP: stop when no frame arrives for S seconds (default 2)",
+        help="UDP: stop when no frame has been accepted for S seconds, wall clock "
+        f"(default 2; at most {MAX_TIMEOUT_S:g})",
+    )
+    p.add_argument(
+        "--resync-after",
+        type=int,
+        default=RESYNC_AFTER,
+        metavar="N",
+        help="UDP: after N consecutive out-of-order frame indices, accept the next one "
+        f"as a new sequence (a restarted sender; default {RESYNC_AFTER})",
+    )
+    p.add_argument(
+        "--load-deadline",
+        type=float,
+        default=DEFAULT_DEADLINE_S,
+        metavar="S",
+        help="seconds the graph's first call may take when the bundle loads "
+        f"(default {DEFAULT_DEADLINE_S:g}; at most {MAX_DEADLINE_S:g})",
     )
     p.add_argument(
         "--check",
@@ -90,7 +130,7 @@ def _parser() -> argparse.ArgumentParser:
         "--rounds",
         type=int,
         default=3,
-        help="--choose-session: round-robin passes (default 3)",
+        help=f"--choose-session: round-robin passes (default 3; 1 to {MAX_ROUNDS})",
     )
     p.add_argument(
         "--report-modules",
@@ -137,9 +177,44 @@ def _summary_lines(summary: dict[str, Any], source: str) -> list[str]:
 
 def _address(text: str) -> tuple[str, int]:
     host, sep, port = text.rpartition(":")
-    if not sep or not host or not port.isdigit() or int(port) > 65535:
-        raise ValueError(f"--udp must be HOST:PORT (e.g. 127.0.0.1:9000); got {text!r}")
+    if (
+        not sep
+        or not host
+        or not port.isascii()
+        or not port.isdigit()
+        or len(port) > 5
+        or int(port) > 65535
+    ):
+        raise OptionError(
+            "--udp", f"must be HOST:PORT (e.g. 127.0.0.1:9000); got {text!r}"
+        )
     return host, int(port)
+
+
+def _check_args(args: argparse.Namespace) -> None:
+    """Range checks argparse's types do not make; each error names its option."""
+    if args.frames is not None and args.frames < 1:
+        raise OptionError("--frames", f"must be >= 1; got {args.frames}")
+    if not 0 < args.timeout <= MAX_TIMEOUT_S:  # False for NaN too
+        raise OptionError(
+            "--timeout", f"must be in (0, {MAX_TIMEOUT_S:g}] s; got {args.timeout}"
+        )
+    if not 0 < args.load_deadline <= MAX_DEADLINE_S:
+        raise OptionError(
+            "--load-deadline",
+            f"must be in (0, {MAX_DEADLINE_S:g}] s; got {args.load_deadline}",
+        )
+    if not 1 <= args.resync_after <= MAX_RESYNC_AFTER:
+        raise OptionError(
+            "--resync-after",
+            f"must be in [1, {MAX_RESYNC_AFTER}]; got {args.resync_after}",
+        )
+    if not 1 <= args.rounds <= MAX_ROUNDS:
+        raise OptionError(
+            "--rounds", f"must be in [1, {MAX_ROUNDS}]; got {args.rounds}"
+        )
+    if args.udp is not None:
+        _address(args.udp)
 
 
 def _replay(bundle: Bundle, path: Path | None) -> tuple[Any, Any, str]:
@@ -157,9 +232,8 @@ def _replay(bundle: Bundle, path: Path | None) -> tuple[Any, Any, str]:
 def run(argv: Sequence[str] | None = None) -> int:
     """Parse arguments, run, print; return the exit status (see the module docstring)."""
     args = _parser().parse_args(argv)
-    bundle = load_bundle(args.bundle)
-    if args.frames is not None and args.frames < 1:
-        raise ValueError(f"--frames must be >= 1; got {args.frames}")
+    _check_args(args)
+    bundle = load_bundle(args.bundle, deadline_s=args.load_deadline)
     out: dict[str, Any]
     if args.choose_session:
         frames, times, name = _replay(bundle, args.replay)
@@ -172,6 +246,13 @@ def run(argv: Sequence[str] | None = None) -> int:
             max_frames=n,
             io_binding=args.io_binding,
         )
+        if not rows:
+            raise FrameError(
+                name,
+                f"{min(n, len(frames))} frames make no decision (the window is "
+                f"{bundle.manifest.frame.window} frames): --choose-session has "
+                "nothing to measure",
+            )
         print(
             f"{bundle.manifest.name}: session options on {min(n, len(frames))} frames of {name}, {args.rounds} rounds (median), fastest first"
         )
@@ -190,13 +271,18 @@ def run(argv: Sequence[str] | None = None) -> int:
         loop = StreamLoop(bundle, io_binding=args.io_binding)
         if args.udp is not None:
             host, port = _address(args.udp)
-            with UdpSource(
-                host,
-                port,
-                bundle.manifest.frame.shape,
-                max_frames=args.frames,
-                timeout_s=args.timeout,
-            ) as src:
+            try:
+                source = UdpSource(
+                    host,
+                    port,
+                    bundle.manifest.frame.shape,
+                    max_frames=args.frames,
+                    timeout_s=args.timeout,
+                    resync_after=args.resync_after,
+                )
+            except OptionError as exc:
+                raise OptionError("--udp", exc.problem) from None
+            with source as src:
                 print(
                     f"listening on {src.where} (frames of {src.n_values} float32 values, format v1)",
                     file=sys.stderr,
@@ -208,6 +294,7 @@ def run(argv: Sequence[str] | None = None) -> int:
                 "received": src.n_received,
                 "rejected": src.n_rejected,
                 "lost": src.n_lost,
+                "resyncs": src.n_resyncs,
                 "last_error": src.last_error,
             }
         else:
@@ -225,7 +312,8 @@ def run(argv: Sequence[str] | None = None) -> int:
         if udp is not None:
             out["udp"] = udp
             print(
-                f"udp: {udp['received']} received, {udp['rejected']} rejected, {udp['lost']} lost"
+                f"udp: {udp['received']} received, {udp['rejected']} rejected, "
+                f"{udp['lost']} lost, {udp['resyncs']} resyncs"
                 + (
                     f" (last rejected: {udp['last_error']})"
                     if udp["last_error"]
@@ -240,7 +328,11 @@ def run(argv: Sequence[str] | None = None) -> int:
         out["heavy_modules_loaded"] = heavy
         print("heavy modules loaded: " + (", ".join(heavy) if heavy else "none"))
     if args.json is not None:
-        atomic_write_text(args.json, json.dumps(out, indent=2) + "\n")
+        try:
+            atomic_write_text(args.json, json.dumps(out, indent=2) + "\n")
+        except (OSError, ValueError) as exc:  # ValueError: a NUL in the path
+            why = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+            raise OptionError("--json", f"cannot write {args.json}: {why}") from None
     return status
 
 
@@ -248,8 +340,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     """Entry point of the ``slipkit-run`` console script."""
     try:
         status = run(argv)
-    except (BundleError, FrameError, ValueError, OSError) as exc:
-        print(f"slipkit-run: {exc}", file=sys.stderr)
+    except SlipkitError as exc:
+        print(f"slipkit-run: error: {' '.join(str(exc).split())}", file=sys.stderr)
         raise SystemExit(2) from None
     raise SystemExit(status)
 

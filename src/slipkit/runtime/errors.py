@@ -47,3 +47,20 @@ class FrameError(SlipkitError, ValueError):
         self.where = where
         self.problem = problem
         super().__init__(f"{where}: {problem}")
+
+
+class OptionError(SlipkitError, ValueError):
+    """A command-line option or a keyword argument of the runtime is out of range.
+
+    Parameters
+    ----------
+    option : str
+        The option (``--timeout``) or argument (``timeout_s``) at fault.
+    problem : str
+        What is wrong and what was expected.
+    """
+
+    def __init__(self, option: str, problem: str) -> None:
+        self.option = option
+        self.problem = problem
+        super().__init__(f"{option}: {problem}")

@@ -75,7 +75,9 @@ import numpy as np
 import onnxruntime as ort
 from numpy.typing import ArrayLike, NDArray
 
-from slipkit.runtime.bundle import Budget, Bundle
+from slipkit.runtime.bundle import MODEL_FILE, Budget, Bundle
+from slipkit.runtime.errors import BundleError
+from slipkit.runtime.session import ORT_ERRORS
 from slipkit.runtime.sources import Frame
 
 #: Streams whose NaN values are data ("not detected"), not faults: the TacTip pins.
@@ -285,9 +287,8 @@ class StreamLoop:
         self._windows = [self._ring[j : j + self._w] for j in range(self._w)]
         self._ops = list(bundle.preprocessing.ops)
         (inp,) = m.inputs
-        assert inp.shape is not None
         assert inp.dtype is not None
-        self._input = np.zeros(inp.shape, dtype=np.dtype(inp.dtype))
+        self._input = np.zeros(inp.static_shape, dtype=np.dtype(inp.dtype))
         # The graph input seen in the preprocessing's output shape (same values, a
         # view): writing the window into it needs no reshape per frame.
         self._input_view = self._input.reshape(bundle.preprocessing.out_shape)
@@ -313,8 +314,14 @@ class StreamLoop:
             self._out_ort = ort.OrtValue.ortvalue_from_numpy(self._out)
             self._binding.bind_ortvalue_input(inp.name, self._in_ort)
             self._binding.bind_ortvalue_output(d.output, self._out_ort)
+        # The warm-up stops early once it has taken the bundle's load deadline: it
+        # only primes allocations, and a slow graph must not hold the start for
+        # warmup x its call time.
+        stop = time.perf_counter() + bundle.deadline_s
         for _ in range(bundle.session_spec.warmup):
             self._call()
+            if time.perf_counter() > stop:
+                break
         self._capacity = capacity
         self.reset()
 
@@ -541,10 +548,24 @@ class StreamLoop:
         self._clean_from = max(self._clean_from, seen + self._w)
 
     def run(self, source: Iterable[Frame]) -> LoopResult:
-        """Push every frame of a source (replay or UDP) and return the result."""
+        """Push every frame of a source (replay or UDP) and return the result.
+
+        Raises
+        ------
+        BundleError
+            onnxruntime failed on a frame (named, with the graph's file).
+        """
         step = self.step
-        for frame in source:
-            step(frame.values, frame.timestamp, frame.arrival_ns)
+        try:
+            for frame in source:
+                step(frame.values, frame.timestamp, frame.arrival_ns)
+        except ORT_ERRORS as exc:
+            raise BundleError(
+                str(self.bundle.path / MODEL_FILE),
+                None,
+                f"onnxruntime failed on stream frame {self.n_frames - 1}: "
+                + " ".join(str(exc).split()),
+            ) from None
         return self.result()
 
     def result(self) -> LoopResult:

@@ -44,13 +44,14 @@ op                           parameters, effect
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
-from slipkit.runtime._schema import Fields
+from slipkit.runtime._schema import MAX_FRAMES, MAX_STEPS, MAX_VALUES, Fields
 
 Array = NDArray[np.float64]
 
@@ -146,7 +147,13 @@ class _Select:
 @register_op("select")
 def _select(f: Fields, in_shape: tuple[int, ...]) -> Op:
     f.only(("op", "indices"))
-    idx = f.integers("indices", minimum=0)
+    idx = f.integers("indices", minimum=0, maximum=MAX_VALUES)
+    if len(idx) * math.prod(in_shape[:-1]) > MAX_VALUES:
+        raise f.error(
+            "indices",
+            f"selects {len(idx)} entries of each of {math.prod(in_shape[:-1])} rows: "
+            f"more than {MAX_VALUES} values",
+        )
     if max(idx) >= in_shape[-1]:
         raise f.error(
             "indices",
@@ -304,8 +311,15 @@ class _BaselineFirst:
 @register_op("baseline_first")
 def _baseline_first(f: Fields, in_shape: tuple[int, ...]) -> Op:
     f.only(("op", "frames", "hop"))
+    n = f.integer("frames", minimum=1, maximum=MAX_FRAMES)
+    if n * math.prod(in_shape[1:]) > MAX_VALUES:
+        raise f.error(
+            "frames",
+            f"{n} frames of {math.prod(in_shape[1:])} values each exceed the "
+            f"{MAX_VALUES} values a baseline may hold",
+        )
     return _BaselineFirst(
-        f.integer("frames", minimum=1), f.integer("hop", 1, minimum=1), in_shape
+        n, f.integer("hop", 1, minimum=1, maximum=MAX_FRAMES), in_shape
     )
 
 
@@ -334,6 +348,10 @@ class Pipeline:
     ) -> None:
         shape = tuple(window_shape)
         self.ops: list[Op] = []
+        if len(steps) > MAX_STEPS:
+            raise Fields(file, {}).error(
+                "preprocessing", f"has {len(steps)} steps; at most {MAX_STEPS}"
+            )
         for i, step in enumerate(steps):
             f = Fields(file, step, f"preprocessing[{i}]")
             name = f.string("op", choices=sorted(OPS))

@@ -28,6 +28,15 @@ One frame per datagram, little-endian::
 A datagram that breaks the format, has the wrong ``n_values`` or an index not above the
 last one is skipped and counted in :attr:`UdpSource.n_rejected` (a live loop must not
 stop on one bad packet); the last reason is kept in :attr:`UdpSource.last_error`.
+
+Resynchronisation: after ``resync_after`` (default 8) *consecutive* well-formed
+datagrams whose index is not above the last accepted one, the next such datagram is
+accepted as the start of a new sequence (:attr:`UdpSource.n_resyncs` counts these),
+so a sensor bridge that restarts at index 0, or one stray datagram with index
+2^64 - 1, costs ``resync_after`` frames instead of the rest of the run. A forward
+jump of more than :data:`MAX_LOST_JUMP` frames is also a resync, not that many lost
+frames. The ``timeout_s`` runs on the wall clock from the last *accepted* frame (from
+the start before the first): junk datagrams do not keep a run alive.
 """
 
 from __future__ import annotations
@@ -37,21 +46,32 @@ import socket
 import struct
 import time
 import zipfile
+import zlib
 from collections.abc import Iterator
 from pathlib import Path
 from types import TracebackType
-from typing import NamedTuple, TypeVar
+from typing import IO, NamedTuple, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from slipkit.runtime.errors import FrameError
+from slipkit.runtime.errors import FrameError, OptionError
 
 MAGIC = b"SLPK"
 VERSION = 1
 #: magic, version, flags, frame index, timestamp (s), n_values.
 HEADER = struct.Struct("<4sHHQdI")
 HEADER_SIZE = HEADER.size  # 28 bytes
+#: Default run of consecutive out-of-order datagrams after which a UDP source resyncs.
+RESYNC_AFTER = 8
+#: Most consecutive out-of-order datagrams ``resync_after`` may ask for.
+MAX_RESYNC_AFTER = 1_000_000
+#: A forward index jump above this many frames is a resync, not lost frames.
+MAX_LOST_JUMP = 1 << 20
+#: Longest UDP timeout, s (one day).
+MAX_TIMEOUT_S = 86_400.0
+#: Largest replay array read (bytes, uncompressed): 1 GiB.
+MAX_REPLAY_BYTES = 1 << 30
 
 
 class Frame(NamedTuple):
@@ -146,10 +166,71 @@ def check_replay_arrays(
     return frames, times
 
 
+_NPY_MAGIC = b"\x93NUMPY"
+_ZIP_MAGIC = b"PK\x03\x04"
+#: What reading a damaged replay can raise: zipfile's BadZipFile, EOFError and
+#: zlib.error on a damaged member, NotImplementedError for an unknown compression,
+#: RuntimeError for an encrypted member; numpy's header parser a ValueError.
+_READ_ERRORS = (
+    OSError,
+    ValueError,
+    EOFError,
+    zipfile.BadZipFile,
+    zlib.error,
+    NotImplementedError,
+    RuntimeError,
+    struct.error,
+)
+
+
+def _read_npy(fp: IO[bytes], available: int, what: str, max_bytes: int) -> np.ndarray:
+    """One ``.npy`` array from ``fp``, its size checked before anything is allocated.
+
+    ``available`` is the number of bytes ``fp`` holds (the file size, or a zip
+    member's uncompressed size). numpy's own header reader is used; the data size
+    the header claims (shape x itemsize) must fit in ``available`` and ``max_bytes``.
+    """
+    version = np.lib.format.read_magic(fp)
+    if version == (1, 0):
+        shape, fortran, dtype = np.lib.format.read_array_header_1_0(fp)
+    elif version == (2, 0):
+        shape, fortran, dtype = np.lib.format.read_array_header_2_0(fp)
+    else:
+        raise ValueError(f"{what}: .npy format version {version} is not read here")
+    if dtype.hasobject:
+        raise ValueError(f"{what}: holds Python objects, which only a pickle can load")
+    nbytes = math.prod(shape) * dtype.itemsize
+    if nbytes > max_bytes:
+        raise ValueError(
+            f"{what}: its header claims shape {list(shape)} of {dtype} = {nbytes} "
+            f"bytes; at most {max_bytes} are read"
+        )
+    header = fp.tell()
+    if nbytes > available - header:
+        raise ValueError(
+            f"{what}: its header claims shape {list(shape)} of {dtype} = {nbytes} "
+            f"bytes but only {max(available - header, 0)} follow (truncated?)"
+        )
+    data = fp.read(nbytes)
+    if len(data) != nbytes:
+        raise ValueError(f"{what}: ended after {len(data)} of {nbytes} data bytes")
+    arr = np.frombuffer(data, dtype=dtype)
+    return arr.reshape(shape, order="F" if fortran else "C")
+
+
 def load_replay(
-    path: str | Path, frame_shape: tuple[int, ...], rate_hz: float
+    path: str | Path,
+    frame_shape: tuple[int, ...],
+    rate_hz: float,
+    *,
+    max_bytes: int = MAX_REPLAY_BYTES,
 ) -> tuple[NDArray[np.floating], NDArray[np.float64]]:
     """Read a ``.npz`` (frames + timestamps) or ``.npy`` (frames) replay file.
+
+    Sizes are checked before anything is allocated: the file itself, each ``.npz``
+    member's uncompressed size (``ZipInfo.file_size``, so a zip bomb is refused
+    unopened) and the data size each ``.npy`` header claims, against ``max_bytes``
+    and against the bytes actually there. Object arrays (pickles) are refused.
 
     Parameters
     ----------
@@ -159,41 +240,74 @@ def load_replay(
         The bundle's ``frame.shape``.
     rate_hz : float
         Frame rate, Hz, for the timestamps of a ``.npy`` file.
+    max_bytes : int
+        Largest file, member and array read, bytes (default 1 GiB).
 
     Returns
     -------
     frames : ndarray of shape (n, *frame_shape)
     timestamps : ndarray of shape (n,), s
+
+    Raises
+    ------
+    FrameError
+        Naming the file (and the member or array) and what is wrong.
     """
     p = Path(path)
     where = str(p)
     if not p.is_file():
         raise FrameError(where, "replay file not found")
+    times: np.ndarray | None = None
     try:
-        loaded = np.load(p, allow_pickle=False)
-    except (OSError, ValueError) as exc:
-        raise FrameError(
-            where, f"not a numpy .npz/.npy file without pickles: {exc}"
-        ) from None
-    if isinstance(loaded, np.lib.npyio.NpzFile):
-        with loaded:
-            if "frames" not in loaded.files:
-                raise FrameError(
-                    where, f"has no 'frames' array; arrays: {loaded.files}"
+        size = p.stat().st_size
+        # A header or a zip directory may add a little to the array's own bytes.
+        if size > max_bytes + (1 << 20):
+            raise ValueError(f"is {size} bytes; at most {max_bytes} are read")
+        with open(p, "rb") as fh:
+            magic = fh.read(6)
+            fh.seek(0)
+            if magic == _NPY_MAGIC:
+                frames = _read_npy(fh, size, "the .npy file", max_bytes)
+            elif magic.startswith(_ZIP_MAGIC):
+                with zipfile.ZipFile(fh) as zf:
+                    members = {
+                        n[:-4]: zf.getinfo(n)
+                        for n in zf.namelist()
+                        if n.endswith(".npy")
+                    }
+                    if "frames" not in members:
+                        raise ValueError(
+                            f"has no 'frames' array; arrays: {sorted(members)[:10]}"
+                        )
+                    arrays = {}
+                    for key in ("frames", "timestamps"):
+                        info = members.get(key)
+                        if info is None:
+                            continue
+                        what = f"member {info.filename!r}"
+                        if info.file_size > max_bytes + (1 << 20):
+                            raise ValueError(
+                                f"{what} unpacks to {info.file_size} bytes; at most "
+                                f"{max_bytes} are read (a zip bomb?)"
+                            )
+                        with zf.open(info) as member:
+                            arrays[key] = _read_npy(
+                                member, info.file_size, what, max_bytes
+                            )
+                    frames = arrays["frames"]
+                    times = arrays.get("timestamps")
+            else:
+                raise ValueError(
+                    f"is neither a .npz (zip) nor a .npy file (starts with {magic!r})"
                 )
-            try:
-                # An .npz reads its arrays lazily: an object array (which needs
-                # pickle) or a damaged member only fails here, not in np.load.
-                frames = loaded["frames"]
-                times = loaded["timestamps"] if "timestamps" in loaded.files else None
-            except (OSError, ValueError, zipfile.BadZipFile) as exc:
-                raise FrameError(
-                    where, f"not a numpy .npz/.npy file without pickles: {exc}"
-                ) from None
-    else:
-        frames, times = loaded, None
+    except _READ_ERRORS as exc:
+        text = " ".join(str(exc).split()) or type(exc).__name__
+        raise FrameError(
+            where, f"not a numpy .npz/.npy file without pickles: {text}"
+        ) from None
     if times is None:
-        times = np.arange(len(frames), dtype=np.float64) / rate_hz
+        n = len(frames) if frames.ndim else 0
+        times = np.arange(n, dtype=np.float64) / rate_hz
     return check_replay_arrays(frames, times, frame_shape, where)
 
 
@@ -270,7 +384,11 @@ class UdpSource(_Socket):
     max_frames : int, optional
         Stop after this many accepted frames.
     timeout_s : float
-        Stop when no datagram arrives for this long, s.
+        Stop when no frame has been *accepted* for this long, s, on the wall clock
+        (junk datagrams do not reset it); in (0, :data:`MAX_TIMEOUT_S`].
+    resync_after : int
+        Consecutive out-of-order datagrams after which the next one starts a new
+        sequence (module docstring); in [1, :data:`MAX_RESYNC_AFTER`].
 
     Attributes
     ----------
@@ -278,10 +396,19 @@ class UdpSource(_Socket):
         The bound address.
     n_received, n_rejected, n_lost : int
         Accepted datagrams, skipped datagrams, and frames missing from gaps in the index.
+    n_resyncs : int
+        Times the index sequence was restarted (a run of ``resync_after``
+        out-of-order datagrams, or a forward jump above :data:`MAX_LOST_JUMP`).
     timed_out : bool
-        The stream ended because nothing arrived within ``timeout_s``.
+        The stream ended because nothing was accepted within ``timeout_s``.
     last_error : str or None
         Why the last datagram was rejected.
+
+    Raises
+    ------
+    OptionError
+        ``timeout_s``, ``resync_after`` or ``max_frames`` out of range, or the
+        address cannot be bound (naming ``host``).
     """
 
     def __init__(
@@ -292,15 +419,47 @@ class UdpSource(_Socket):
         *,
         max_frames: int | None = None,
         timeout_s: float = 2.0,
+        resync_after: int = RESYNC_AFTER,
     ) -> None:
+        if not (
+            isinstance(timeout_s, int | float)
+            and not isinstance(timeout_s, bool)
+            and 0 < timeout_s <= MAX_TIMEOUT_S
+        ):
+            raise OptionError(
+                "timeout_s", f"must be in (0, {MAX_TIMEOUT_S:g}] s; got {timeout_s!r}"
+            )
+        if not (
+            isinstance(resync_after, int)
+            and not isinstance(resync_after, bool)
+            and 1 <= resync_after <= MAX_RESYNC_AFTER
+        ):
+            raise OptionError(
+                "resync_after",
+                f"must be an integer in [1, {MAX_RESYNC_AFTER}]; got {resync_after!r}",
+            )
+        if max_frames is not None and not (
+            isinstance(max_frames, int) and max_frames >= 1
+        ):
+            raise OptionError("max_frames", f"must be >= 1; got {max_frames!r}")
         self.frame_shape = tuple(frame_shape)
         self.n_values = math.prod(self.frame_shape)
         self.max_frames = max_frames
+        self.timeout_s = float(timeout_s)
+        self.resync_after = resync_after
+        if not isinstance(port, int) or not 0 <= port <= 65535:
+            raise OptionError("port", f"must be an integer in [0, 65535]; got {port!r}")
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        # A larger receive queue rides out a burst while the loop runs the model.
-        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
-        self.sock.bind((host, port))
-        self.sock.settimeout(timeout_s)
+        try:
+            # A larger receive queue rides out a burst while the loop runs the model.
+            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+            self.sock.bind((host, port))
+        except (OSError, UnicodeError, TypeError) as exc:
+            self.sock.close()
+            why = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+            raise OptionError(
+                "host", f"cannot listen on {host!r} port {port}: {why}"
+            ) from None
         self.address: tuple[str, int] = self.sock.getsockname()
         self.where = f"udp {self.address[0]}:{self.address[1]}"
         self.expected = HEADER_SIZE + 4 * self.n_values
@@ -309,7 +468,7 @@ class UdpSource(_Socket):
         self._values = np.frombuffer(
             self._buf, dtype="<f4", count=self.n_values, offset=HEADER_SIZE
         ).reshape(self.frame_shape)
-        self.n_received = self.n_rejected = self.n_lost = 0
+        self.n_received = self.n_rejected = self.n_lost = self.n_resyncs = 0
         self.timed_out = False
         self.last_error: str | None = None
 
@@ -319,8 +478,18 @@ class UdpSource(_Socket):
 
     def __iter__(self) -> Iterator[Frame]:
         recv_into, clock, buf = self.sock.recv_into, time.perf_counter_ns, self._buf
+        settimeout, now = self.sock.settimeout, time.monotonic
         last = -1
+        out_of_order = 0  # consecutive well-formed datagrams with an index <= last
+        deadline = now() + self.timeout_s
         while self.max_frames is None or self.n_received < self.max_frames:
+            # The timeout runs from the last accepted frame on the wall clock: a
+            # stream of junk datagrams must not keep the run alive.
+            left = deadline - now()
+            if left <= 0:
+                self.timed_out = True
+                return
+            settimeout(left)
             try:
                 n = recv_into(buf)
             except TimeoutError:
@@ -339,14 +508,23 @@ class UdpSource(_Socket):
                 )
                 continue
             if index <= last:
-                self._reject(
-                    f"frame index {index} is not above the last one ({last}): late or repeated"
-                )
-                continue
-            if last >= 0:
-                self.n_lost += index - last - 1
+                if out_of_order < self.resync_after:
+                    out_of_order += 1
+                    self._reject(
+                        f"frame index {index} is not above the last one ({last}): "
+                        "late or repeated"
+                    )
+                    continue
+                self.n_resyncs += 1  # a sender that restarted its count
+            elif last >= 0:
+                if index - last - 1 > MAX_LOST_JUMP:
+                    self.n_resyncs += 1  # a jump, not that many lost frames
+                else:
+                    self.n_lost += index - last - 1
+            out_of_order = 0
             last = index
             self.n_received += 1
+            deadline = now() + self.timeout_s
             yield Frame(index, ts, self._values, arrival)
 
 

@@ -16,8 +16,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slipkit.runtime.bundle import Bundle
+from slipkit.runtime.errors import OptionError
 from slipkit.runtime.loop import StreamLoop
 from slipkit.runtime.session import SessionSpec
+
+#: Most round-robin passes :func:`choose_session` runs.
+MAX_ROUNDS = 100
 
 
 def default_candidates(warmup: int = 20) -> list[SessionSpec]:
@@ -71,8 +75,27 @@ def choose_session(
     -------
     list of dict
         ``{"session": <manifest session object>, "p50_ms": ..., "p99_ms": ...}``,
-        fastest first.
+        fastest first; empty when the frames make no decision (fewer than a window).
+
+    Raises
+    ------
+    OptionError
+        ``rounds`` outside [1, :data:`MAX_ROUNDS`] or ``max_frames`` below 1.
     """
+    if (
+        isinstance(rounds, bool)
+        or not isinstance(rounds, int)
+        or not 1 <= rounds <= MAX_ROUNDS
+    ):
+        raise OptionError(
+            "rounds", f"must be an integer in [1, {MAX_ROUNDS}]; got {rounds!r}"
+        )
+    if (
+        isinstance(max_frames, bool)
+        or not isinstance(max_frames, int)
+        or max_frames < 1
+    ):
+        raise OptionError("max_frames", f"must be an integer >= 1; got {max_frames!r}")
     specs = (
         default_candidates(bundle.session_spec.warmup)
         if candidates is None
