@@ -111,7 +111,7 @@ def test_davis_release_train_and_evaluate(
     )
     objective = train_main(cfg)
     metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
-    assert objective == pytest.approx(metrics["test"]["mean"]["f1"])
+    assert objective == pytest.approx(metrics["validation"]["mean"]["f1"])
     assert 0.70 == metrics["paper"]["precision"]
     assert "paper" in capsys.readouterr().out
     assert (tmp_path / "run" / "davis_trials.csv").stat().st_size > 0
