@@ -166,8 +166,8 @@ def test_newer_schema_version_is_refused(saved: Path) -> None:
     ("change", "message"),
     [
         ({"format": "something-else"}, "field 'format'"),
-        ({"streams": []}, "field 'streams' is list; expected dict"),
-        ({"schema_version": "1"}, "field 'schema_version' is str; expected int"),
+        ({"streams": []}, "streams: expected an object, got a list"),
+        ({"schema_version": "1"}, 'schema_version: expected the integer 1, got "1"'),
     ],
 )
 def test_malformed_manifest_fields_are_named(

@@ -476,7 +476,13 @@ def test_csv_label_varying_within_trial(tmp_path: Path) -> None:
         SourceFormatError,
         match=r"b\.csv: column 'slip_onset_s' varies within trial 'b'.*line 3",
     ):
-        read_csv_dataset(root, sensor="x", rate_hz=1.0, label_columns=["slip_onset_s"])
+        read_csv_dataset(
+            root,
+            sensor="x",
+            rate_hz=1.0,
+            label_columns=["slip_onset_s"],
+            group_columns=["object"],
+        )
 
 
 def test_csv_missing_column_names_file_and_column(tmp_path: Path) -> None:
@@ -514,11 +520,17 @@ def test_csv_text_channel_names_file_and_column(tmp_path: Path) -> None:
 
 
 def test_csv_channels_differ_between_files(tmp_path: Path) -> None:
-    """Files whose numeric columns differ are rejected naming the later file."""
+    """Files whose channel columns differ are rejected naming the later file."""
     root = make_csv_folder(tmp_path / "rec")
     write_csv(root / "c.csv", ["object", "slip_onset_s", "fx"], [["ball", 0.1, 1]])
-    with pytest.raises(SourceFormatError, match=r"c\.csv: numeric columns fx differ"):
-        read_csv_dataset(root, sensor="x", rate_hz=1.0, label_columns=["slip_onset_s"])
+    with pytest.raises(SourceFormatError, match=r"c\.csv: channel columns fx differ"):
+        read_csv_dataset(
+            root,
+            sensor="x",
+            rate_hz=1.0,
+            label_columns=["slip_onset_s"],
+            group_columns=["object"],
+        )
 
 
 def test_csv_class_value_outside_classes(tmp_path: Path) -> None:

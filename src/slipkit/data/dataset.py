@@ -122,14 +122,25 @@ class StreamSpec:
             if key not in entry:
                 raise DatasetError(where, f"streams.{name}: missing field '{key}'")
         rate = entry["rate_hz"]
-        return cls(
-            name=name,
-            channels=tuple(entry["channels"]),
-            units=dict(entry["units"]),
-            rate_hz=None if rate is None else float(rate),
-            kind=entry["kind"],
-            description=str(entry.get("description", "")),
-        )
+        channels = tuple(entry["channels"])
+        extra = sorted(set(entry["units"]) - set(channels))
+        if extra:
+            raise DatasetError(
+                where,
+                f"streams.{name}.units: gives units for {extra}, which are not among "
+                f"its channels {list(channels)}",
+            )
+        try:
+            return cls(
+                name=name,
+                channels=channels,
+                units=dict(entry["units"]),
+                rate_hz=None if rate is None else float(rate),
+                kind=entry["kind"],
+                description=str(entry.get("description", "")),
+            )
+        except DatasetError as exc:  # name the file, and the field under 'streams'
+            raise DatasetError(where, f"streams.{name}: {exc.problem}") from exc
 
 
 @dataclass(frozen=True)
@@ -231,7 +242,7 @@ def _check_table(
         if not _is_numeric(table[col]):
             raise DatasetError(
                 where,
-                f"column '{col}' has dtype {table[col].dtype}; expected a numeric dtype",
+                f"column {col!r} has dtype {table[col].dtype}; expected a numeric dtype",
             )
     t = table["t"].to_numpy(dtype=np.float64)
     if not np.all(np.isfinite(t)):
@@ -273,6 +284,24 @@ def _check_table(
                     f"snapshot stream has {int(counts.max())} rows for trial {uniques[int(counts.argmax())]!r}; expected 1",
                 )
     return table
+
+
+def _check_numeric_label(column: pd.Series, spec: LabelSpec, where: str) -> None:
+    """A label without classes is a number per trial (NaN: unknown); refuse text."""
+    if _is_numeric(column) or column.isna().all():
+        return
+    numbers = pd.to_numeric(column, errors="coerce")
+    bad = np.flatnonzero((numbers.isna() & column.notna()).to_numpy())
+    if not len(bad):
+        return  # numbers held as objects (e.g. floats mixed with None)
+    row = int(bad[0])
+    unit = f"unit {spec.unit!r}" if spec.unit is not None else "no unit"
+    raise DatasetError(
+        where,
+        f"column {spec.name!r} holds {column.iloc[row]!r} at row {row}; the "
+        f"manifest declares label {spec.name!r} numeric "
+        f"({unit}, no classes), so every value must be a number or NaN",
+    )
 
 
 class Dataset:
@@ -327,19 +356,28 @@ class Dataset:
                 f"column 'trial_id' repeats {dup.iloc[0]!r}; trial ids must be unique",
             )
         self.labels: dict[str, LabelSpec] = dict(labels or {})
+        both = sorted(set(self.labels) & set(groups))
+        if both or "trial_id" in [*self.labels, *groups]:
+            raise DatasetError(
+                twhere,
+                f"column {(both or ['trial_id'])[0]!r} cannot be "
+                + ("both a label and a group" if both else "a label or a group"),
+            )
         for col in [*self.labels, *groups]:
             if col not in trials.columns:
                 raise DatasetError(
-                    twhere, f"missing column '{col}' declared in the manifest"
+                    twhere, f"missing column {col!r} declared in the manifest"
                 )
         for lab in self.labels.values():
-            if lab.classes is not None:
+            if lab.classes is None:
+                _check_numeric_label(trials[lab.name], lab, twhere)
+            else:
                 values = trials[lab.name].dropna().astype(str)
                 unknown = sorted(set(values) - set(lab.classes))
                 if unknown:
                     raise DatasetError(
                         twhere,
-                        f"column '{lab.name}' holds {unknown[:5]} outside its classes {list(lab.classes)}",
+                        f"column {lab.name!r} holds {unknown[:5]} outside its classes {list(lab.classes)}",
                     )
         if set(streams) != set(tables):
             raise DatasetError(

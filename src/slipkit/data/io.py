@@ -14,26 +14,21 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
 from slipkit import __version__
 from slipkit._files import atomic_dir, recover_leftovers, sha256_file
+from slipkit.data._manifest import (
+    MAX_MANIFEST_BYTES,
+    parse_manifest_bytes,
+    validate_manifest,
+)
 from slipkit.data.dataset import FORMAT, SCHEMA_VERSION, Dataset, LabelSpec, StreamSpec
 from slipkit.errors import DatasetError
 
 MANIFEST = "manifest.json"
 TRIALS = "trials.parquet"
-
-_REQUIRED: dict[str, type | tuple[type, ...]] = {
-    "format": str,
-    "schema_version": int,
-    "sensor": str,
-    "streams": dict,
-    "labels": dict,
-    "groups": list,
-    "provenance": dict,
-    "files": dict,
-}
 
 
 def stream_file(name: str) -> str:
@@ -108,7 +103,20 @@ def _default(obj: Any) -> Any:
 
 
 def read_manifest(path: Path | str) -> dict[str, Any]:
-    """Read and check ``manifest.json`` of a dataset folder (fields and types only)."""
+    """Read ``manifest.json`` of a dataset folder and check it against its schema.
+
+    The file is read as bounded JSON (at most ``MAX_MANIFEST_BYTES``, nesting at most
+    ``MAX_DEPTH``, no key twice in one object) and validated against
+    ``slipkit/data/schema/dataset-manifest.schema.json`` (see
+    ``docs/dataset-format.md``): field types, ranges and required fields.
+
+    Raises
+    ------
+    DatasetError
+        Naming ``manifest.json`` and the field path at fault, e.g.
+        ``streams.force.rate_hz: expected a positive number (Hz, at most 1e9) for
+        a sampled stream, got true``.
+    """
     path = Path(path)
     mpath = path / MANIFEST
     if not path.is_dir():
@@ -117,10 +125,18 @@ def read_manifest(path: Path | str) -> dict[str, Any]:
         )
     if not mpath.is_file():
         raise DatasetError(str(mpath), "missing; not a slipkit dataset folder")
-    try:
-        manifest = json.loads(mpath.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise DatasetError(str(mpath), f"is not valid JSON ({exc})") from exc
+    _check_inside(path, MANIFEST)
+    size = mpath.stat().st_size
+    if size > MAX_MANIFEST_BYTES:
+        raise DatasetError(
+            str(mpath),
+            f"is {size} bytes; a manifest is at most {MAX_MANIFEST_BYTES} bytes",
+        )
+    with open(mpath, "rb") as fh:
+        # Read one byte past the cap so that an over-long file is refused without
+        # reading all of it (a manifest could be swapped for a multi-GB file).
+        data = fh.read(MAX_MANIFEST_BYTES + 1)
+    manifest = parse_manifest_bytes(data, str(mpath))
     if not isinstance(manifest, dict):
         raise DatasetError(str(mpath), "expected a JSON object at the top level")
     if manifest.get("format") != FORMAT:
@@ -128,28 +144,35 @@ def read_manifest(path: Path | str) -> dict[str, Any]:
             str(mpath),
             f"field 'format' is {manifest.get('format')!r}; expected {FORMAT!r}",
         )
-    for key, typ in _REQUIRED.items():
-        if key not in manifest:
-            raise DatasetError(str(mpath), f"missing field '{key}'")
-        if not isinstance(manifest[key], typ) or (
-            typ is int and isinstance(manifest[key], bool)
-        ):
-            raise DatasetError(
-                str(mpath),
-                f"field '{key}' is {type(manifest[key]).__name__}; expected {getattr(typ, '__name__', typ)}",
-            )
-    version = manifest["schema_version"]
-    if version > SCHEMA_VERSION:
+    version = manifest.get("schema_version")
+    if (
+        isinstance(version, int)
+        and not isinstance(version, bool)
+        and version > SCHEMA_VERSION
+    ):
+        # Before the schema: a newer version may lay out the other fields differently.
         raise DatasetError(
             str(mpath),
             f"field 'schema_version' is {version}, newer than this slipkit reads ({SCHEMA_VERSION}); upgrade slipkit",
         )
-    if version < 1:
-        raise DatasetError(
-            str(mpath),
-            f"field 'schema_version' is {version}; expected 1..{SCHEMA_VERSION}",
-        )
+    validate_manifest(manifest, str(mpath))
     return manifest
+
+
+def _check_inside(root: Path, rel: str) -> Path:
+    """``root / rel``, refused unless it resolves inside ``root`` (``..``, an absolute
+    path or a symlink pointing out of the dataset folder)."""
+    target = root / rel
+    base = root.resolve()
+    resolved = target.resolve()
+    if not resolved.is_relative_to(base):
+        raise DatasetError(
+            str(target),
+            f"resolves to {resolved}, outside the dataset folder {base}; every file "
+            "of a dataset must lie inside its folder (no '..', absolute path, or "
+            "symlink pointing out)",
+        )
+    return target
 
 
 def _read_parquet(path: Path, rel: str) -> pd.DataFrame:
@@ -191,6 +214,8 @@ def load_dataset(path: Path | str, *, verify: bool = True) -> Dataset:
     unlisted = sorted(expected - set(files))
     if unlisted:
         raise DatasetError(mpath, f"field 'files' does not list {unlisted}")
+    for rel in files:
+        _check_inside(path, rel)
     on_disk = (
         {p.relative_to(path).as_posix() for p in (path / "streams").glob("*.parquet")}
         if (path / "streams").is_dir()
@@ -214,9 +239,19 @@ def load_dataset(path: Path | str, *, verify: bool = True) -> Dataset:
                     f"sha256 mismatch: manifest says {digest[:12]}..., file has {actual[:12]}... (modified or truncated)",
                 )
     trials = _read_parquet(path, TRIALS)
+    if len(trials) == 0:
+        raise DatasetError(
+            str(path / TRIALS), "has no rows; a dataset holds at least one trial"
+        )
+    n_trials = manifest.get("n_trials", len(trials))
+    if n_trials != len(trials):
+        raise DatasetError(
+            mpath,
+            f"field 'n_trials' is {n_trials}, but {TRIALS} has {len(trials)} rows",
+        )
     tables = {s: _read_parquet(path, stream_file(s)) for s in specs}
     labels = {k: LabelSpec.from_json(k, v) for k, v in manifest["labels"].items()}
-    return Dataset(
+    dataset = Dataset(
         sensor=manifest["sensor"],
         streams=specs,
         trials=trials,
@@ -230,3 +265,28 @@ def load_dataset(path: Path | str, *, verify: bool = True) -> Dataset:
             **{s: str(path / stream_file(s)) for s in specs},
         },
     )
+    for s, table in dataset.tables.items():
+        _check_channels_hold_data(table, dataset.streams[s], path / stream_file(s))
+    return dataset
+
+
+def _check_channels_hold_data(
+    table: pd.DataFrame, spec: StreamSpec, file: Path
+) -> None:
+    """Refuse a channel with no finite value in a non-empty table (e.g. all NaN).
+
+    Only the whole stored dataset is checked: a subset (one trial of a TacTip
+    recording whose pin is lost throughout) may legitimately hold an all-NaN
+    channel, but a dataset where a channel never holds a number carries no data
+    there and would train on NaN or on nothing.
+    """
+    if len(table) == 0:
+        return
+    for col in spec.channels:
+        values = table[col].to_numpy(dtype=np.float64, na_value=np.nan)
+        if not np.isfinite(values).any():
+            raise DatasetError(
+                str(file),
+                f"column '{col}' has no finite value in its {len(table)} rows (all "
+                "NaN or infinite); a channel must hold data",
+            )

@@ -30,6 +30,15 @@ __all__ = [
 
 #: Unit given to channels when ``units`` is None.
 UNKNOWN_UNIT = "unknown"
+#: Columns every slipkit stream table has: a channel, label or group of the same name
+#: would collide with them.
+RESERVED = {"t": "time (s)", "trial_id": "trial id"}
+#: Appended to "not a number" when channels are found, not listed.
+_DEFAULT_CHANNELS_HINT = (
+    "; without channels=[...], every column that is not the time, trial, label or "
+    "group column is a channel: give text columns as label_columns or "
+    "group_columns, or list channels=[...]"
+)
 
 
 def line_of(row: int) -> int:
@@ -65,9 +74,43 @@ def read_csv_file(file: Path) -> pd.DataFrame:
         ) from exc
     except UnicodeDecodeError as exc:
         raise SourceFormatError(f"{file}: is not a UTF-8 text CSV ({exc})") from exc
+    if not df.index.equals(pd.RangeIndex(len(df))):
+        # pandas takes the first field(s) as an index, silently, when *every* data
+        # row has more fields than the header: the columns would shift by one.
+        raise SourceFormatError(
+            f"{file}: line 2 has {len(df.columns) + df.index.nlevels} fields but the "
+            f"header (line 1) has {len(df.columns)}; every row needs as many fields "
+            "as the header"
+        )
+    _check_header_names(file)
     filled = df.notna().any(axis=1).to_numpy()
     n_keep = int(np.flatnonzero(filled)[-1]) + 1 if filled.any() else 0
     return df.iloc[:n_keep]
+
+
+def _check_header_names(file: Path) -> None:
+    """Refuse empty or repeated names in the header line.
+
+    pandas renames them silently (``Unnamed: 2``, ``fx.1``), so the header is read
+    again as text (one line) to see the names as written.
+    """
+    raw = pd.read_csv(
+        file, header=None, nrows=1, dtype=str, keep_default_na=False, index_col=False
+    )
+    names = ["" if pd.isna(v) else str(v) for v in raw.iloc[0].tolist()]
+    seen: dict[str, int] = {}
+    for pos, name in enumerate(names, start=1):
+        if not name.strip():
+            raise SourceFormatError(
+                f"{file}: line 1, column {pos}: empty column name; every column of "
+                "the header needs a name"
+            )
+        if name in seen:
+            raise SourceFormatError(
+                f"{file}: line 1, column {pos}: column name {name!r} repeats column "
+                f"{seen[name]}; column names must be unique"
+            )
+        seen[name] = pos
 
 
 def check_header(file: Path, actual: Iterable[Any], expected: Sequence[str]) -> None:
@@ -95,28 +138,41 @@ def check_header(file: Path, actual: Iterable[Any], expected: Sequence[str]) -> 
     )
 
 
-def numeric_block(file: Path, df: pd.DataFrame, columns: Sequence[str]) -> np.ndarray:
+def numeric_block(
+    file: Path, df: pd.DataFrame, columns: Sequence[str], *, hint: str = ""
+) -> np.ndarray:
     """The given columns as a float64 array, every value finite.
+
+    Parameters
+    ----------
+    hint : str
+        Appended to the message of a value that is not a number (what to do).
 
     Raises
     ------
     SourceFormatError
-        Naming the file, line and column of the first value that is not a number,
-        or of the first missing value (an empty field or a short row).
+        Naming the file, line and column of the first value that is not a number
+        (text such as ``abc``, ``1,5``, ``0x10``, or ``True``/``False``), or of the
+        first missing value (an empty field or a short row).
     """
     cols = list(columns)
     for col in cols:
         series = df[col]
-        if pd.api.types.is_bool_dtype(series) or not pd.api.types.is_numeric_dtype(
-            series
-        ):
+        if pd.api.types.is_bool_dtype(series):
+            # pandas reads a column of True/False as bool, which would pass as 1/0.
+            row = int(np.flatnonzero(series.notna().to_numpy())[0])
+            raise SourceFormatError(
+                f"{file}: line {line_of(row)}, column {col!r}: "
+                f"{bool(series.iloc[row])!r} is not a number (write 1/0){hint}"
+            )
+        if not pd.api.types.is_numeric_dtype(series):
             coerced = pd.to_numeric(series, errors="coerce")
             bad = np.flatnonzero((coerced.isna() & series.notna()).to_numpy())
             if len(bad):
                 row = int(bad[0])
                 raise SourceFormatError(
                     f"{file}: line {line_of(row)}, column {col!r}: "
-                    f"{series.iloc[row]!r} is not a number"
+                    f"{series.iloc[row]!r} is not a number{hint}"
                 )
     values = df.loc[:, cols].apply(pd.to_numeric).to_numpy(dtype=np.float64)
     bad_cells = ~np.isfinite(values)
@@ -184,7 +240,39 @@ class _Roles:
                     "each column has one role"
                 )
             seen[col] = role
+        for role, col in named:
+            if col in RESERVED and role in ("label_columns", "group_columns"):
+                raise SourceFormatError(
+                    f"{role} names {col!r}, which is slipkit's own "
+                    f"{RESERVED[col]} column in every dataset; rename the column"
+                )
         self.named = named
+
+    def check_channels(self, channels: Sequence[str], file: Path | None) -> None:
+        """Channels must be distinct, play no other role and avoid slipkit's names."""
+        at = f"{file}: " if file is not None else "channels: "
+        roles = dict((col, role) for role, col in self.named)
+        seen: set[str] = set()
+        for col in channels:
+            if col in roles:
+                raise SourceFormatError(
+                    f"{at}column {col!r} is given both as channels and as "
+                    f"{roles[col]}; each column has one role"
+                )
+            if col in seen:
+                raise SourceFormatError(f"{at}channels repeats {col!r}")
+            seen.add(col)
+            if col in RESERVED:
+                use = (
+                    "time_column='t' if it holds times in s"
+                    if col == "t"
+                    else ("trial_column='trial_id' if it names the trials")
+                )
+                raise SourceFormatError(
+                    f"{at}column {col!r} would be a channel named like slipkit's own "
+                    f"{RESERVED[col]} column; give {use}, or leave it out of "
+                    "channels=[...] (or rename it)"
+                )
 
     @property
     def columns(self) -> set[str]:
@@ -227,8 +315,11 @@ def read_csv_dataset(
         ``1 / median(dt)`` when not given). Without either, the stream is a
         ``snapshot`` stream: one row per trial, ``t = 0`` s.
     channels : sequence of str, optional
-        Channel columns, in order. Default: every numeric column that is not the
-        time, trial, label or group column (they must be the same in every file).
+        Channel columns, in order. Default: every column that is not the time,
+        trial, label or group column (they must be the same in every file). Every
+        channel value must be a finite number: a text cell is an error naming its
+        line and column, never a reason to drop the column. No channel may be
+        named ``t`` or ``trial_id`` (every stream table has those columns).
     units : mapping of str to str, or str, optional
         Unit of each channel (``"N"``, ``"V"``, ``"1"``), or one unit for all. A
         mapping may also give the unit of numeric labels. None: ``"unknown"``.
@@ -258,9 +349,10 @@ def read_csv_dataset(
     ------
     SourceFormatError
         Naming the file and column (and line or trial) of malformed input: a
-        missing column, a value that is not a number, a missing value, time going
-        backwards, a label or group column varying within a trial, channel
-        columns differing between files; or naming the argument at fault.
+        missing column, an empty or repeated header name, a value that is not a
+        number, a missing value, time going backwards, a label or group column
+        varying within a trial, channel columns differing between files, a column
+        colliding with ``t`` / ``trial_id``; or naming the argument at fault.
     """
     path = Path(path)
     roles = _Roles(time_column, trial_column, label_columns, group_columns)
@@ -278,7 +370,13 @@ def read_csv_dataset(
     files, root = _list_files(path, glob)
     snapshot = time_column is None and rate_hz is None
 
-    chans: tuple[str, ...] | None = None if channels is None else tuple(channels)
+    chans: tuple[str, ...] | None = (
+        None if channels is None else tuple(str(c) for c in channels)
+    )
+    if chans is not None:
+        if not chans:
+            raise SourceFormatError("channels is empty; list at least one column")
+        roles.check_channels(chans, None)
     first_file: Path | None = None
     parts: list[pd.DataFrame] = []
     rows: list[dict[str, Any]] = []
@@ -296,23 +394,21 @@ def read_csv_dataset(
                     f"{_abbrev(list(df.columns))}"
                 )
         if channels is None:
-            found = tuple(
-                c
-                for c in df.columns
-                if c not in roles.columns
-                and pd.api.types.is_numeric_dtype(df[c])
-                and not pd.api.types.is_bool_dtype(df[c])
-            )
+            # Every other column is a channel, numeric or not: picking only the
+            # columns pandas read as numbers would drop a channel silently over
+            # one bad cell ("abc", "1,5", "True"); numeric_block names it instead.
+            found = tuple(c for c in df.columns if c not in roles.columns)
             if not found:
                 raise SourceFormatError(
-                    f"{file}: no numeric channel columns besides the time, trial, "
-                    "label and group columns"
+                    f"{file}: no channel columns besides the time, trial, label and "
+                    "group columns"
                 )
+            roles.check_channels(found, file)
             if chans is None:
                 chans, first_file = found, file
             elif found != chans:
                 raise SourceFormatError(
-                    f"{file}: numeric columns {_abbrev(list(found))} differ from "
+                    f"{file}: channel columns {_abbrev(list(found))} differ from "
                     f"{_abbrev(list(chans))} in {first_file}; give channels=[...] "
                     "explicitly or make the files agree"
                 )
@@ -323,7 +419,9 @@ def read_csv_dataset(
                     f"{file}: no channel column {col!r}; columns are "
                     f"{_abbrev(list(df.columns))}"
                 )
-        values = numeric_block(file, df, chans)
+        values = numeric_block(
+            file, df, chans, hint=_DEFAULT_CHANNELS_HINT if channels is None else ""
+        )
 
         if root is None:
             file_id = file.stem
