@@ -222,22 +222,24 @@ def test_loosened_budget_no_longer_passes_check(
 
 
 # -- bounded fields ------------------------------------------------------------------------
+OUT_OF_RANGE = [
+    ("frame.window", 10**9, "frame.window"),
+    ("frame.hop", 10**12, "frame.hop"),
+    ("frame.rate_hz", 1e300, "frame.rate_hz"),
+    ("frame.shape", [10**6, 10**6], "frame.shape"),
+    ("debounce.k", 10**12, "debounce.k"),
+    ("budget_ms.frame_period", 1e12, "budget_ms.frame_period"),
+    ("session.warmup", 10**12, "session.warmup"),
+    ("session.intra_op_num_threads", 10**6, "session.intra_op_num_threads"),
+    ("session.inter_op_num_threads", 10**6, "session.inter_op_num_threads"),
+    ("opset", 10**9, "opset"),
+    ("threshold", 10**400, "threshold"),
+    ("training.metrics.test.f1", math.inf, "training.metrics.test.f1"),
+]
+
+
 @pytest.mark.parametrize(
-    ("path", "value", "field"),
-    [
-        ("frame.window", 10**9, "frame.window"),
-        ("frame.hop", 10**12, "frame.hop"),
-        ("frame.rate_hz", 1e300, "frame.rate_hz"),
-        ("frame.shape", [10**6, 10**6], "frame.shape"),
-        ("debounce.k", 10**12, "debounce.k"),
-        ("budget_ms.frame_period", 1e12, "budget_ms.frame_period"),
-        ("session.warmup", 10**12, "session.warmup"),
-        ("session.intra_op_num_threads", 10**6, "session.intra_op_num_threads"),
-        ("session.inter_op_num_threads", 10**6, "session.inter_op_num_threads"),
-        ("opset", 10**9, "opset"),
-        ("threshold", 10**400, "threshold"),
-        ("training.metrics.test.f1", math.inf, "training.metrics.test.f1"),
-    ],
+    ("path", "value", "field"), OUT_OF_RANGE, ids=[c[0] for c in OUT_OF_RANGE]
 )
 def test_out_of_range_numbers_are_refused_by_field(
     bundle: Path, path: str, value: Any, field: str
@@ -255,6 +257,7 @@ def test_out_of_range_numbers_are_refused_by_field(
         ({"op": "baseline_first", "frames": 10**11}, "preprocessing[1].frames"),
         ({"op": "baseline_first", "frames": 1, "hop": 10**9}, "preprocessing[1].hop"),
     ],
+    ids=["baseline-of-1e11-frames", "baseline-hop-1e9"],
 )
 def test_out_of_range_preprocessing_is_refused_by_field(
     bundle: Path, step: dict[str, Any], field: str
@@ -643,6 +646,7 @@ def test_junk_datagrams_do_not_keep_the_timeout_alive() -> None:
         ({"resync_after": 0}, "resync_after"),
         ({"max_frames": 0}, "max_frames"),
     ],
+    ids=["timeout-negative", "timeout-nan", "resync-0", "frames-0"],
 )
 def test_udp_source_options_are_bounded(kwargs: dict[str, Any], option: str) -> None:
     """UdpSource refuses a negative or NaN timeout, a zero resync run, zero frames, naming the argument."""
