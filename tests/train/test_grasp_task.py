@@ -93,6 +93,12 @@ def test_grasp_split_keeps_objects_apart_and_reports_the_controls(
     assert m["test"]["balanced_accuracy"] > 0.9  # the synthetic rule is easy
     assert m["selection"]["best"]["model"] in {"logreg", "svm"}
     assert 4 == len(m["selection"]["candidates"])
+    assert [
+        "none",
+        "per_grasp",
+        "orientation_feature",
+        "per_orientation",
+    ] == list(m["normalisation_at_best"])
     assert {"scores.csv", "normalisation.csv"} <= {p.name for p in tmp_path.iterdir()}
 
 
