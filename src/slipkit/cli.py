@@ -7,10 +7,17 @@ the subcommand's function. Only working subcommands are listed here.
 
 from __future__ import annotations
 
+import contextlib
+import datetime as dt
 import importlib
+import io
+import os
 import sys
-from collections.abc import Callable, Sequence
-from typing import Any
+import tempfile
+import traceback
+from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
+from typing import Any, NoReturn
 
 #: subcommand -> ("module:function", one-line help). Each function takes the composed DictConfig.
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
@@ -68,8 +75,125 @@ def _resolve(target: str) -> Callable[[Any], Any]:
     return fn
 
 
+def one_line(text: str) -> str:
+    """``text`` on one line: its non-blank lines joined with ``; `` (tabs and indents dropped)."""
+    parts = [" ".join(line.split()) for line in str(text).splitlines()]
+    parts = [p for p in parts if p]
+    # "Could not override 'x'." + "Key 'x' is not in struct" -> "...'x'; Key ..."
+    head = [p.rstrip(".:") for p in parts[:-1]]
+    return "; ".join([*head, *parts[-1:]]) or "(no message)"
+
+
+def _fail(sub: str, message: str, status: int) -> NoReturn:
+    print(f"slipkit {sub}: {one_line(message)}", file=sys.stderr)
+    raise SystemExit(status)
+
+
+def log_dir() -> Path:
+    """Where an internal error's full traceback is written: ``$SLIPKIT_LOG_DIR``, else
+    ``<system temp dir>/slipkit-logs``."""
+    given = os.environ.get("SLIPKIT_LOG_DIR")
+    return Path(given) if given else Path(tempfile.gettempdir()) / "slipkit-logs"
+
+
+def _write_traceback(sub: str, exc: BaseException, argv: Sequence[str]) -> str:
+    """Write ``exc``'s traceback to a new log file; its path, or why it could not be written."""
+    stamp = dt.datetime.now(dt.UTC).strftime("%Y%m%dT%H%M%SZ")
+    try:
+        folder = log_dir()
+        folder.mkdir(parents=True, exist_ok=True)
+        path = folder / f"{sub}-{stamp}-{os.getpid()}.log"
+        text = "".join(traceback.format_exception(exc))
+        path.write_text(f"slipkit {' '.join([sub, *argv])}\n\n{text}", encoding="utf-8")
+    except OSError as err:  # the net must not fail: say why instead of a path
+        return f"traceback not written ({err.strerror or err})"
+    return f"traceback in {path}"
+
+
+def _internal_error(sub: str, exc: BaseException, argv: Sequence[str]) -> NoReturn:
+    where = _write_traceback(sub, exc, argv)
+    _fail(
+        sub,
+        f"internal error (a bug, please report it): {type(exc).__name__}: {exc} ({where})",
+        1,
+    )
+
+
+@contextlib.contextmanager
+def _hydra_raises() -> Iterator[None]:
+    """Hydra re-raises instead of printing a (stripped) traceback itself.
+
+    ``hydra.main`` reports an exception with ``run_and_report``, which prints a
+    traceback unless ``HYDRA_FULL_ERROR`` is set, in which case it re-raises: set,
+    every error reaches :func:`main`, which prints one line.
+    """
+    saved = os.environ.get("HYDRA_FULL_ERROR")
+    os.environ["HYDRA_FULL_ERROR"] = "1"
+    try:
+        yield
+    finally:
+        if saved is None:
+            os.environ.pop("HYDRA_FULL_ERROR", None)
+        else:
+            os.environ["HYDRA_FULL_ERROR"] = saved
+
+
+def _composition_message(exc: Exception) -> str:
+    """One line for an error Hydra or OmegaConf raised while composing the config."""
+    from hydra.errors import MissingConfigException, OverrideParseException
+
+    if isinstance(exc, MissingConfigException) and exc.options:
+        first = str(exc).splitlines()[0]
+        return f"{first}; available: {', '.join(map(str, exc.options))}"
+    if isinstance(exc, OverrideParseException):
+        return f"{exc.override}: {exc.message}"
+    text = str(exc)
+    cause = exc.__cause__
+    if cause is not None and str(cause) and str(cause) not in text:
+        text = f"{text}\n{cause}"
+    return text
+
+
+class _ArgumentError(Exception):
+    """argparse refused the command line (raised instead of printing the usage)."""
+
+
+def _check_flags(sub: str, rest: Sequence[str]) -> None:
+    """Refuse unknown ``--flags`` in one line before Hydra's parser prints its usage.
+
+    Hydra parses the command line with its own ``argparse`` parser, whose ``error``
+    prints an eight-line usage; the same parser is run here first with ``error``
+    raising instead (the hook argparse documents for subclasses).
+    """
+    try:
+        from hydra._internal.utils import get_args_parser
+    except ImportError:  # pragma: no cover - a Hydra without it: Hydra reports itself
+        return
+    parser = get_args_parser()
+
+    def error(message: str) -> NoReturn:
+        raise _ArgumentError(message)
+
+    parser.error = error  # type: ignore[method-assign]
+    try:
+        # --version prints and exits here; Hydra prints it again on its own parse.
+        with contextlib.redirect_stdout(io.StringIO()):
+            parser.parse_args(list(rest))
+    except _ArgumentError as exc:
+        _fail(sub, f"error: {exc} (slipkit {sub} --help lists the options)", 2)
+    except SystemExit:
+        pass
+
+
 def main(argv: Sequence[str] | None = None) -> None:
-    """Entry point of the ``slipkit`` console script."""
+    """Entry point of the ``slipkit`` console script.
+
+    Every failure ends in one line on stderr, never a traceback: a
+    :class:`~slipkit.errors.SlipkitError` or a config Hydra cannot compose is the
+    user's to fix (``slipkit <sub>: error: ...``, status 2); anything else is a bug
+    (``slipkit <sub>: internal error ...``, status 1, the full traceback written to a
+    log file under :func:`log_dir`).
+    """
     args = list(sys.argv[1:] if argv is None else argv)
     if not args or args[0] in {"-h", "--help", "help"}:
         print(_usage())
@@ -89,27 +213,61 @@ def main(argv: Sequence[str] | None = None) -> None:
         )
         raise SystemExit(2) from None
 
+    from hydra.errors import HydraException, InstantiationException
+    from omegaconf.errors import (
+        InterpolationResolutionError,
+        MissingMandatoryValue,
+        OmegaConfBaseException,
+    )
+
     from slipkit import config_dir
+    from slipkit._options import check_options
     from slipkit.errors import SlipkitError
 
-    task = _resolve(SUBCOMMANDS[sub][0])
+    try:
+        task = _resolve(SUBCOMMANDS[sub][0])
+    except Exception as exc:
+        _internal_error(sub, exc, rest)
 
     def run(cfg: Any) -> Any:
+        # Everything is caught here, inside the task function: an exception that
+        # escaped to Hydra would be printed with "Error executing job" first.
         try:
+            check_options(cfg, sub)
             return task(cfg)
         except SlipkitError as exc:
             # Bad input is the user's to fix: say what and where, no traceback.
-            print(f"slipkit {sub}: error: {exc}", file=sys.stderr)
-            raise SystemExit(2) from exc
+            _fail(sub, f"error: {exc}", 2)
+        except (MissingMandatoryValue, InterpolationResolutionError) as exc:
+            # A `???` left unset or an `${...}` that does not resolve: the config's text.
+            key = getattr(exc, "full_key", None)
+            first = str(exc).splitlines()[0]
+            _fail(sub, f"error: {key}: {first}" if key else f"error: {first}", 2)
+        except InstantiationException as exc:
+            # A config node whose target refused its arguments (an unknown or missing
+            # key added on the command line): the config is the user's to fix.
+            _fail(sub, f"error: {exc}", 2)
+        except Exception as exc:
+            _internal_error(sub, exc, rest)
 
+    _check_flags(sub, rest)
     run.__name__ = sub.replace("-", "_")
     run.__module__ = __name__
     saved = sys.argv
     sys.argv = [f"slipkit {sub}", *rest]
     try:
-        hydra.main(version_base="1.3", config_path=str(config_dir()), config_name=sub)(
-            run
-        )()
+        with _hydra_raises():
+            hydra.main(
+                version_base="1.3", config_path=str(config_dir()), config_name=sub
+            )(run)()
+    except (HydraException, OmegaConfBaseException) as exc:
+        # The overrides do not compose (unknown group option, key not in the config,
+        # override syntax): Hydra's message, on one line.
+        _fail(sub, f"error: {_composition_message(exc)}", 2)
+    except KeyboardInterrupt:
+        _fail(sub, "interrupted", 130)
+    except Exception as exc:
+        _internal_error(sub, exc, rest)
     finally:
         sys.argv = saved
 

@@ -25,5 +25,12 @@ class DatasetError(SlipkitError, ValueError):
         super().__init__(f"{where}: {problem}")
 
 
+class TrainingDataError(SlipkitError, ValueError):
+    """The training side cannot fit the estimator (too few trials or distinct values).
+
+    A ``ValueError`` too, as scikit-learn estimators raise for unusable data.
+    """
+
+
 class SourceFormatError(SlipkitError, ValueError):
     """A source file handed to an importer does not have the layout it expects."""

@@ -20,6 +20,7 @@ import contextlib
 import io
 import json
 import logging
+import math
 import sys
 import time
 from dataclasses import dataclass, field
@@ -202,6 +203,177 @@ def _run_one(
     return row, ev, cost, summary
 
 
+def _task_needs(task: Any) -> tuple[tuple[type, ...], tuple[type, ...], str] | None:
+    """What ``task`` can fit: (accepted estimator classes, refused base, what it feeds).
+
+    ``None`` for a task this table does not know (no class check). Analytic
+    detectors (``slipkit.baselines``) read a stream sample by sample inside their
+    own task; learned models get feature rows or windows from theirs.
+    """
+    from sklearn.base import ClassifierMixin, RegressorMixin
+
+    from slipkit.baselines.base import StreamDetector
+    from slipkit.baselines.davis import DavisPolarity
+    from slipkit.baselines.sliptack import DropAcceleration, StickSlipSpeed
+    from slipkit.train.tasks.davis import DavisRelease
+    from slipkit.train.tasks.detection import StreamDetection
+    from slipkit.train.tasks.force import FingerDirection, ForceRegression
+    from slipkit.train.tasks.slip_type import WindowClassification
+    from slipkit.train.tasks.sliptack import SlipTackAccel, SlipTackSpeed
+    from slipkit.train.tasks.tactip import TacTipFrames
+
+    analytic = (StreamDetector, DavisPolarity, StickSlipSpeed, DropAcceleration)
+    stream = getattr(task, "stream", "?")
+    table: list[tuple[type, tuple[type, ...], tuple[type, ...], str]] = [
+        (
+            StreamDetection,
+            (StreamDetector,),
+            (),
+            f"runs an analytic stream detector (StreamDetector) on stream {stream!r}",
+        ),
+        (
+            DavisRelease,
+            (DavisPolarity,),
+            (),
+            "runs the DAVIS event-polarity detector",
+        ),
+        (SlipTackSpeed, (StickSlipSpeed,), (), "runs the SlipTack speed estimator"),
+        (SlipTackAccel, (DropAcceleration,), (), "runs the SlipTack drop estimator"),
+        (
+            WindowClassification,
+            (ClassifierMixin,),
+            analytic,
+            f"fits a learned classifier on windows of stream {stream!r}",
+        ),
+        (
+            TacTipFrames,
+            (ClassifierMixin,),
+            analytic,
+            f"fits a learned classifier on pin features of stream {stream!r}",
+        ),
+        (
+            ForceRegression,
+            (RegressorMixin,),
+            analytic,
+            f"fits a learned regressor on frames of stream {stream!r}",
+        ),
+        (
+            FingerDirection,
+            (RegressorMixin,),
+            analytic,
+            f"fits a learned regressor on frames of stream {stream!r}",
+        ),
+    ]
+    for task_cls, accepted, refused, feeds in table:
+        if isinstance(task, task_cls):
+            return accepted, refused, feeds
+    return None
+
+
+def check_estimators(comp: dict[str, Any], cfg: DictConfig) -> None:
+    """Refuse, before any training, an estimator the family's task or data cannot feed.
+
+    For every estimator of the comparison (with its ``task_overrides``): its class
+    must be one the task fits (a stream task runs an analytic detector; a frame or
+    window task fits a learned classifier or regressor), its constructor must accept
+    its config, and on the family's data (built once here, as each run builds it) the
+    task's stream must exist with the channels the task names, a ``rate_hz`` the
+    estimator declares must be the stream's, and an ``n_channels`` the stream's
+    channel count.
+
+    Raises
+    ------
+    SlipkitError
+        Naming the comparison, the estimator and why it cannot run.
+    """
+    from slipkit.train.commands import build
+    from slipkit.train.data import training_dataset
+
+    name = comp.get("name")
+    estimators: dict[str, dict[str, Any]] = dict(comp.get("estimators") or {})
+    analytic = [str(a) for a in comp.get("analytic") or []]
+    plans: list[tuple[str, dict[str, Any], Any]] = []
+    tcfg: DictConfig | None = None
+    for est, node in estimators.items():
+        where = f"comparison {name!r}: estimator {est!r}"
+        if not isinstance(node, dict) or not node.get("_target_"):
+            raise SlipkitError(
+                f"{where}: no _target_ (a configs/model or configs/detector entry)"
+            )
+        try:
+            cls = get_class(str(node["_target_"]))
+        except Exception as exc:  # hydra raises ImportError / ValueError variants
+            raise SlipkitError(
+                f"{where}: _target_ {node['_target_']!r} is not an importable class ({exc})"
+            ) from None
+        tcfg = _train_config(
+            comp,
+            est,
+            node,
+            analytic=_is_analytic(est, node, analytic),
+            seed=int(cfg.seed),
+            data_root=str(cfg.get("data_root", "")),
+            run_dir=Path("unused"),
+        )
+        task = build(tcfg.task, "task")
+        needs = _task_needs(task)
+        if needs is not None:
+            accepted, refused, feeds = needs
+            if not issubclass(cls, accepted) or issubclass(cls, refused):
+                raise SlipkitError(
+                    f"{where} ({cls.__name__}) cannot run in this family's task: "
+                    f"{type(task).__name__} {feeds}"
+                )
+        build(
+            OmegaConf.create({k: v for k, v in node.items() if k != "_partial_"}),
+            "model",
+        )  # a constructor refusing its config fails here, not after other trainings
+        plans.append((est, node, task))
+    if tcfg is None:
+        return
+    dataset = training_dataset(tcfg)  # the same data every estimator's run builds
+    for est, node, task in plans:
+        where = f"comparison {name!r}: estimator {est!r}"
+        stream = getattr(task, "stream", None)
+        if not isinstance(stream, str):
+            continue
+        if stream not in dataset.streams:
+            raise SlipkitError(
+                f"{where}: its task reads stream {stream!r}, which the family's data "
+                f"({dataset.name!r}, sensor {dataset.sensor!r}) does not hold; streams: "
+                f"{sorted(dataset.streams)}"
+            )
+        spec = dataset.streams[stream]
+        chosen = getattr(task, "channels", None)
+        channels = list(spec.channels)
+        if isinstance(chosen, list | tuple):
+            missing = [str(c) for c in chosen if str(c) not in channels]
+            if missing:
+                raise SlipkitError(
+                    f"{where}: its task reads channels {missing} of stream {stream!r}, "
+                    f"which holds {channels}"
+                )
+            channels = [str(c) for c in chosen]
+        rate = node.get("rate_hz")
+        if (
+            isinstance(rate, int | float)
+            and spec.rate_hz
+            and not math.isclose(float(rate), float(spec.rate_hz), rel_tol=1e-9)
+        ):
+            raise SlipkitError(
+                f"{where}: rate_hz={rate:g} Hz, but stream {stream!r} of the family's "
+                f"data is sampled at {spec.rate_hz:g} Hz (set "
+                f"comparison.estimators.{est}.rate_hz={spec.rate_hz:g})"
+            )
+        width = node.get("n_channels")
+        if isinstance(width, int) and width != len(channels):
+            raise SlipkitError(
+                f"{where}: n_channels={width}, but stream {stream!r} of the family's "
+                f"data has {len(channels)} channel(s) (set "
+                f"comparison.estimators.{est}.n_channels={len(channels)})"
+            )
+
+
 def run_comparison(
     cfg: DictConfig, folder: Path, *, progress: bool = True
 ) -> Comparison:
@@ -213,6 +385,8 @@ def run_comparison(
     estimators: dict[str, dict[str, Any]] = dict(comp.get("estimators") or {})
     if not estimators:
         raise SlipkitError(f"comparison {comp.get('name')!r} lists no estimators")
+    with quiet_console():
+        check_estimators(comp, cfg)
     seed = int(cfg.seed)
     primary = str(comp.get("primary", "accuracy"))
     analytic = [str(a) for a in comp.get("analytic") or []]

@@ -14,6 +14,14 @@ import numpy as np
 from sklearn.model_selection import GroupShuffleSplit, train_test_split
 
 from slipkit.data.dataset import Dataset
+from slipkit.errors import SlipkitError
+
+
+class SplitError(SlipkitError, ValueError):
+    """A split that cannot be made (too few trials, groups or blocks for its sides).
+
+    A ``ValueError`` too, so callers that catch that keep working.
+    """
 
 
 @dataclass(frozen=True)
@@ -56,7 +64,7 @@ class BlockSplit:
 
 def _check_fraction(name: str, value: float) -> None:
     if not 0.0 <= value < 1.0:
-        raise ValueError(f"{name} must be in [0, 1); got {value}")
+        raise SplitError(f"{name} must be in [0, 1); got {value}")
 
 
 def _check_enough(n: int, unit: str, test_size: float, val_size: float) -> None:
@@ -67,7 +75,7 @@ def _check_enough(n: int, unit: str, test_size: float, val_size: float) -> None:
     n_test = int(np.ceil(test_size * n))
     n_val = int(np.ceil(val_size * (n - n_test)))
     if n - n_test - n_val < 1 or (test_size and n_test < 1):
-        raise ValueError(
+        raise SplitError(
             f"cannot split {n} {unit} into test {test_size:.0%} and val {val_size:.0%} "
             "with at least one on every side; use fewer or smaller sides, or more data"
         )
@@ -133,8 +141,10 @@ def split_by_group(
     ids = np.asarray(dataset.trial_ids, dtype=object)
     groups = dataset.trials[group].astype(str).to_numpy()
     if len(set(groups)) < 2:
-        raise ValueError(
+        raise SplitError(
             f"cannot split by {group!r}: only one value ({groups[0]!r}) in the dataset"
+            if len(groups)
+            else f"cannot split by {group!r}: the dataset holds no trials"
         )
     _check_enough(len(set(groups)), f"values of {group!r}", test_size, val_size)
     tr, te = next(
@@ -160,7 +170,7 @@ def split_by_group(
 def time_blocks(dataset: Dataset, stream: str, block_s: float) -> np.ndarray:
     """Block id of every row of ``stream``: contiguous ``block_s``-second stretches of one trial."""
     if not block_s > 0:
-        raise ValueError(f"block_s must be > 0 s; got {block_s}")
+        raise SplitError(f"block_s must be > 0 s; got {block_s}")
     table = dataset.stream(stream)
     tid = table["trial_id"].to_numpy()
     t = table["t"].to_numpy(dtype=np.float64)

@@ -116,6 +116,7 @@ def train_main(cfg: DictConfig) -> float:
             model = build(estimator_node(cfg), "model")
             dataset = training_dataset(cfg)
             log.info("dataset: %r", dataset)
+            check_trainable(dataset, task)
             seed_everything(seed)  # model constructors may have imported torch
             result = task.fit(model, dataset, seed=seed, out=tmp)
             objective = task.objective_value(result.metrics)
@@ -222,7 +223,140 @@ def _dataset_info(dataset: Any, cfg: DictConfig) -> dict[str, Any]:
         # what `slipkit evaluate` checks trial overlap against (same ids + provenance)
         "provenance_sha256": _provenance_digest(dataset),
         "trial_ids": [str(t) for t in dataset.trial_ids],
+        # what `slipkit evaluate` checks a new dataset against (sensor layout)
+        "streams": {
+            name: {"channels": list(spec.channels), "rate_hz": spec.rate_hz}
+            for name, spec in sorted(dataset.streams.items())
+        },
     }
+
+
+#: task options naming the stream(s) an estimator reads (their channels must match)
+INPUT_STREAM_KEYS = ("stream", "pdc_stream")
+#: task options naming further streams the task scores against (they must be present)
+TRUTH_STREAM_KEYS = ("truth_stream", "target")
+
+
+def check_trainable(dataset: Any, task: Task) -> None:
+    """Refuse, in one line, a dataset the task cannot learn from.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The training dataset (a folder, a raw recording or a simulation).
+    task : Task
+        The run's task; its ``stream`` / ``pdc_stream`` / ``channels`` name what the
+        estimator reads.
+
+    Raises
+    ------
+    SlipkitError
+        The dataset holds no trials, lacks a stream the task reads, or a channel the
+        estimator reads holds no finite value (all NaN or infinite).
+    """
+    import numpy as np
+
+    if len(dataset) == 0:
+        raise SlipkitError(
+            f"dataset {dataset.name!r} holds no trials; there is nothing to train on"
+        )
+    for key in INPUT_STREAM_KEYS:
+        name = getattr(task, key, None)
+        if not isinstance(name, str):
+            continue
+        if name not in dataset.streams:
+            raise SlipkitError(
+                f"task.{key}={name}: dataset {dataset.name!r} (sensor "
+                f"{dataset.sensor!r}) holds no stream {name!r}; streams: "
+                f"{sorted(dataset.streams)}"
+            )
+        table = dataset.tables[name]
+        wanted = getattr(task, "channels", None) if key == "stream" else None
+        channels = (
+            [str(c) for c in wanted]
+            if isinstance(wanted, list | tuple)
+            else list(dataset.streams[name].channels)
+        )
+        if not len(table):
+            continue  # an event stream may hold no rows; the task judges that
+        for channel in channels:
+            if channel not in table.columns:
+                raise SlipkitError(
+                    f"task.channels: stream {name!r} of dataset {dataset.name!r} has "
+                    f"no channel {channel!r}; channels: "
+                    f"{list(dataset.streams[name].channels)}"
+                )
+            values = np.asarray(table[channel], dtype=np.float64)
+            if not np.isfinite(values).any():
+                raise SlipkitError(
+                    f"dataset {dataset.name!r}: stream {name!r} channel {channel!r} "
+                    f"has no finite value in its {len(values)} rows (all NaN or "
+                    "infinite); there is nothing to train on"
+                )
+
+
+def _preview(channels: list[str]) -> str:
+    shown = ", ".join(channels[:4])
+    return f"[{shown}{', ...' if len(channels) > 4 else ''}]"
+
+
+def check_fits_run(run: Any, dataset: Any, where: Path) -> None:
+    """Refuse, in one line, a dataset whose sensor or stream layout differs from the run's.
+
+    A fitted estimator reads the channels it was trained on: a TacTip with another
+    pin count, or another sensor, would reach the model as the wrong number of
+    features. Compared with ``run.json`` (``dataset.sensor`` and, for runs written
+    since it is recorded, ``dataset.streams``): the sensor, the presence of every
+    stream the run's task names, and the channels of the stream(s) it reads.
+
+    Raises
+    ------
+    SlipkitError
+        Naming the dataset folder, the run, and both values that differ.
+    """
+    trained = dict(run.info.get("dataset") or {})
+    what = (
+        f"dataset {where} ({dataset.name!r}, sensor {dataset.sensor!r}) does not fit "
+        f"run {run.path}"
+    )
+    origin = f"trained on {trained.get('name', '?')!r}"
+    sensor = trained.get("sensor")
+    if sensor is not None and str(sensor) != str(dataset.sensor):
+        raise SlipkitError(
+            f"{what}: the run was {origin} from sensor {sensor!r}, this dataset is from "
+            f"sensor {dataset.sensor!r}"
+        )
+    streams = dict(trained.get("streams") or {})
+    task_cfg = run.config.get("task") or {}
+    for key in (*INPUT_STREAM_KEYS, *TRUTH_STREAM_KEYS):
+        name = task_cfg.get(key)
+        if not isinstance(name, str):
+            continue
+        if key in TRUTH_STREAM_KEYS and name not in streams:
+            continue  # not recorded as a training stream (or an older run.json)
+        if name not in dataset.streams:
+            raise SlipkitError(
+                f"{what}: the run's task reads stream {name!r} (task.{key}), which "
+                f"this dataset does not hold; streams: {sorted(dataset.streams)}"
+            )
+        if key not in INPUT_STREAM_KEYS or name not in streams:
+            continue
+        want = [str(c) for c in streams[name].get("channels") or []]
+        have = list(dataset.streams[name].channels)
+        chosen = task_cfg.get("channels") if key == "stream" else None
+        if chosen is not None:
+            missing = [str(c) for c in chosen if str(c) not in have]
+            if missing:
+                raise SlipkitError(
+                    f"{what}: the run reads channels {missing} of stream {name!r} "
+                    f"(task.channels), which this dataset lacks; its channels: "
+                    f"{_preview(have)}"
+                )
+        elif want and want != have:
+            raise SlipkitError(
+                f"{what}: stream {name!r} has {len(have)} channels {_preview(have)}, "
+                f"the run was {origin} with {len(want)} {_preview(want)}"
+            )
 
 
 def evaluate_main(cfg: DictConfig) -> Path:
@@ -234,6 +368,7 @@ def evaluate_main(cfg: DictConfig) -> Path:
     """
     run = read_run(Path(str(cfg.run)))
     dataset = load_dataset(Path(str(cfg.dataset)))
+    check_fits_run(run, dataset, Path(str(cfg.dataset)))
     task: Task = build(run.config.task, "task")
     seed_everything(int(run.config.get("seed", 0)))
     fingerprint = dataset.fingerprint()
@@ -284,4 +419,10 @@ def evaluate_main(cfg: DictConfig) -> Path:
     return out
 
 
-__all__ = ["evaluate_main", "seed_everything", "train_main"]
+__all__ = [
+    "check_fits_run",
+    "check_trainable",
+    "evaluate_main",
+    "seed_everything",
+    "train_main",
+]

@@ -1,0 +1,276 @@
+"""Checks of the options each ``slipkit`` subcommand reads, before it reads them.
+
+Hydra types an override by its text: ``n_trials=2.9`` arrives as a float,
+``seed=abc`` as a string, ``rate_hz=true`` as a bool and a required ``run: ???``
+as a missing value. A bare ``int()`` then truncates 2.9 to 2, ``float(True)`` is
+1 Hz, and the rest end in tracebacks. :func:`check_options` checks every option of
+a subcommand against one table (:data:`OPTIONS`) and raises a
+:class:`~slipkit.errors.SlipkitError` naming the first bad one, e.g.
+``n_trials=2.9: expected a whole number >= 1``.
+
+Why hand-written rather than OmegaConf structured configs: OmegaConf's typed nodes
+have no ranges (``n_trials >= 1``, ``seed < 2**32``), turn ``true`` into nothing
+useful for an ``int`` field only after a multi-line error, and a schema per
+subcommand would have to mirror every config group the experiments merge in. A
+table of small rules keeps the configs as they are and the messages one line.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from omegaconf import DictConfig, OmegaConf
+from omegaconf.errors import OmegaConfBaseException
+
+from slipkit.errors import SlipkitError
+
+#: largest seed: ``numpy.random.seed`` (which ``slipkit train`` also sets) takes < 2**32
+MAX_SEED = 2**32 - 1
+
+
+def show(value: Any) -> str:
+    """``value`` as it would be typed in a Hydra override (``true``, ``null``, ``2.9``)."""
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return str(value)
+
+
+@dataclass(frozen=True)
+class Rule:
+    """One option's rule.
+
+    Parameters
+    ----------
+    expected : str
+        What the message says was expected (``"a whole number >= 1"``).
+    accept : callable
+        ``accept(value) -> bool`` for a present, non-null value.
+    nullable : bool
+        ``null`` is allowed (the option's "not set").
+    required : bool
+        The option must be given (a ``???`` in the config, or null when not nullable).
+    """
+
+    expected: str
+    accept: Callable[[Any], bool]
+    nullable: bool = False
+    required: bool = False
+
+    def null(self) -> Rule:
+        """The same rule with ``null`` allowed."""
+        return Rule(self.expected + " or null", self.accept, nullable=True)
+
+
+def _is_number(value: Any) -> bool:
+    # bool is an int subclass: `rate_hz=true` must not pass as 1.
+    return (
+        isinstance(value, int | float)
+        and not isinstance(value, bool)
+        and math.isfinite(value)
+    )
+
+
+def _is_whole(value: Any) -> bool:
+    # 3.0 is a whole number (Hydra reads `n_trials=3.0` as a float); 2.9 is not.
+    return _is_number(value) and float(value).is_integer()
+
+
+def whole(minimum: int = 0, maximum: int | None = None) -> Rule:
+    """A whole number in ``[minimum, maximum]`` (``3`` or ``3.0``; never ``2.9`` or ``true``)."""
+    text = (
+        f"a whole number >= {minimum}"
+        if maximum is None
+        else f"a whole number in [{minimum}, {maximum}]"
+    )
+    return Rule(
+        text,
+        lambda v: _is_whole(v) and v >= minimum and (maximum is None or v <= maximum),
+    )
+
+
+def number(*, minimum: float | None = None, positive: bool = False) -> Rule:
+    """A finite number (``> 0`` when ``positive``, ``>= minimum`` when given)."""
+    if positive:
+        return Rule("a finite number > 0", lambda v: _is_number(v) and v > 0)
+    if minimum is not None:
+        return Rule(
+            f"a finite number >= {minimum:g}",
+            lambda v: _is_number(v) and v >= minimum,
+        )
+    return Rule("a finite number", _is_number)
+
+
+FLAG = Rule("true or false", lambda v: isinstance(v, bool))
+SEED = whole(0, MAX_SEED)
+COUNT = whole(1)
+TEXT = Rule(
+    "a non-empty text",
+    # Hydra reads `name=2024` as an int: a name or path may still be all digits.
+    lambda v: (
+        isinstance(v, str | int | float)
+        and not isinstance(v, bool)
+        and str(v).strip() != ""
+    ),
+)
+PATH = Rule("a path", TEXT.accept, required=True)
+RATE = number(positive=True)
+
+#: subcommand -> dotted option -> rule. Options not listed are not checked here (the
+#: code that reads them refuses bad values with a SlipkitError of its own).
+OPTIONS: dict[str, dict[str, Rule]] = {
+    "import": {"path": PATH, "out": PATH, "overwrite": FLAG},
+    "info": {"dataset": PATH, "verify": FLAG, "json": FLAG},
+    "simulate": {
+        "n_trials": COUNT,
+        "seed": SEED,
+        "out": PATH,
+        "overwrite": FLAG,
+        "progress": FLAG,
+        "summary": FLAG,
+    },
+    "train": {
+        "name": TEXT,
+        "seed": SEED,
+        "runs_dir": TEXT,
+        "run_dir": TEXT.null(),
+        "overwrite": FLAG,
+    },
+    "evaluate": {"run": PATH, "dataset": PATH, "name": TEXT.null()},
+    "export": {
+        "run": PATH,
+        "out": TEXT.null(),
+        "exports_dir": TEXT,
+        "name": TEXT.null(),
+        "overwrite": FLAG,
+        "opset": whole(17, 18),
+        "debounce_k": COUNT.null(),
+        "replay_max_frames": COUNT.null(),
+        "choose_session": FLAG,
+        "parity.score_eps": number(minimum=0.0).null(),
+        "parity.atol": number(minimum=0.0),
+        "parity.max_calls": COUNT.null(),
+        "regression.threshold": number(),
+        "session.rounds": COUNT,
+        "session.max_frames": COUNT,
+    },
+    "compare": {
+        "seed": SEED,
+        "runs_dir": TEXT,
+        "out": TEXT.null(),
+        "overwrite": FLAG,
+        "progress": FLAG,
+        "cost.export": FLAG,
+        "cost.max_frames": COUNT,
+        "cost.warmup": whole(0),
+        "cost.keep_bundles": FLAG,
+    },
+    "demo": {
+        "out": PATH,
+        "overwrite": FLAG,
+        "seed": SEED,
+        "quick": FLAG,
+        "progress": FLAG,
+        "cost.max_frames": COUNT,
+        "cost.quick_max_frames": COUNT,
+        "replay.max_frames": COUNT,
+        "replay.warmup": whole(0),
+    },
+}
+
+
+def _lookup(cfg: DictConfig, key: str) -> tuple[bool, bool, Any]:
+    """(present, missing, value) of the dotted ``key``; interpolations resolved."""
+    parent_key, _, leaf = key.rpartition(".")
+    try:
+        parent = OmegaConf.select(cfg, parent_key) if parent_key else cfg
+        if not isinstance(parent, DictConfig) or leaf not in parent:
+            return False, False, None
+        if OmegaConf.is_missing(parent, leaf):
+            return True, True, None
+        return True, False, parent[leaf]
+    except OmegaConfBaseException as exc:
+        # e.g. `out=${nope}`: an interpolation the user wrote that cannot resolve.
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise SlipkitError(f"{key}: {first}") from None
+
+
+def check_value(key: str, value: Any, rule: Rule) -> None:
+    """Raise a SlipkitError ``key=value: expected ...`` unless ``value`` meets ``rule``."""
+    if value is None:
+        if rule.nullable:
+            return
+        if rule.required:
+            raise SlipkitError(f"{key}=...: missing; this option is required")
+        raise SlipkitError(f"{key}=null: expected {rule.expected}")
+    if not rule.accept(value):
+        raise SlipkitError(f"{key}={show(value)}: expected {rule.expected}")
+
+
+def check_rules(cfg: DictConfig, rules: Mapping[str, Rule], prefix: str = "") -> None:
+    """Check every ``key -> rule`` of ``rules`` on ``cfg`` (keys relative to ``prefix``)."""
+    for key, rule in rules.items():
+        full = f"{prefix}{key}"
+        present, missing, value = _lookup(cfg, full)
+        if missing:
+            raise SlipkitError(f"{full}=...: missing; this option is required")
+        if not present:
+            if rule.required:
+                raise SlipkitError(f"{full}=...: missing; this option is required")
+            continue
+        check_value(full, value, rule)
+
+
+def check_rates(cfg: DictConfig, node_key: str, *, nullable: bool) -> None:
+    """Every ``*rate_hz`` option directly under ``node_key`` is a finite number > 0."""
+    present, missing, node = _lookup(cfg, node_key)
+    if not present or missing or not isinstance(node, DictConfig):
+        return
+    rule = RATE.null() if nullable else RATE
+    for key in map(str, node.keys()):
+        if key.endswith("rate_hz"):
+            check_rules(cfg, {f"{node_key}.{key}": rule})
+
+
+def check_dataset(cfg: DictConfig, prefix: str = "") -> None:
+    """The data options of a run (``dataset.*``, the scene's and the source's rates).
+
+    ``dataset.n_trials`` and ``dataset.seed`` are read only when the run simulates
+    (neither ``dataset.path`` nor ``dataset.raw`` is set), so only then are they checked.
+    """
+    check_rules(cfg, {"dataset.path": TEXT.null(), "dataset.raw": TEXT.null()}, prefix)
+    _, _, path = _lookup(cfg, f"{prefix}dataset.path")
+    _, _, raw = _lookup(cfg, f"{prefix}dataset.raw")
+    if raw:
+        check_rates(cfg, f"{prefix}source", nullable=True)
+    if not path and not raw:
+        check_rules(cfg, {"dataset.n_trials": COUNT, "dataset.seed": SEED}, prefix)
+        check_rates(cfg, f"{prefix}scene.model", nullable=False)
+
+
+def check_options(cfg: DictConfig, command: str) -> None:
+    """Check the options of ``slipkit <command>``; raise a SlipkitError naming the first bad one."""
+    check_rules(cfg, OPTIONS.get(command, {}))
+    if command == "simulate":
+        check_rates(cfg, "scene.model", nullable=False)
+    elif command == "import":
+        check_rates(cfg, "source", nullable=True)
+    elif command == "train":
+        check_dataset(cfg)
+    elif command == "compare":
+        check_dataset(cfg, "comparison.")
+
+
+__all__ = [
+    "OPTIONS",
+    "Rule",
+    "check_dataset",
+    "check_options",
+    "check_rules",
+    "check_value",
+    "show",
+]
