@@ -686,7 +686,7 @@ def test_commands_touch_nothing_but_their_own_out(
     before = _snapshot(tree)
     monkeypatch.chdir(tree)
     steps = [
-        ["simulate", *SIM_OPTS, "n_trials=2", "out=sim"],
+        ["simulate", *SIM_OPTS, "n_trials=4", "out=sim"],
         ["import", *CSV_OPTS, "path=csv", "out=imp"],
         ["train", "experiment=fsr_roc", "dataset.path=sim", "run_dir=run"],
         ["evaluate", "run=run", "dataset=sim", "name=again"],
