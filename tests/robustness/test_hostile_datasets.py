@@ -265,6 +265,17 @@ def test_deeply_nested_json_is_refused(ds: Path, depth: int) -> None:
     assert f"{ds}/manifest.json: {expected}" == _error(ds)
 
 
+def test_integer_beyond_pythons_digit_limit_is_refused(ds: Path) -> None:
+    """A 5000-digit integer (Python's int parser stops at 4300 digits) is a DatasetError."""
+    text = json.dumps(_manifest(ds)).replace(
+        '"n_trials": 3', '"n_trials": ' + "9" * 5000
+    )
+    (ds / "manifest.json").write_text(text)
+    assert _error(ds).startswith(
+        f"{ds}/manifest.json: is not valid JSON (Exceeds the limit (4300 digits)"
+    )
+
+
 def test_nesting_at_the_cap_still_loads(ds: Path) -> None:
     """Provenance nested exactly MAX_DEPTH levels deep (top level included) loads."""
     manifest = _manifest(ds)
@@ -698,9 +709,9 @@ def test_column_named_like_slipkits_own_is_a_clear_error(
 @pytest.mark.parametrize("role", ["label_columns", "group_columns"])
 def test_label_or_group_named_trial_id_is_refused(tmp_path: Path, role: str) -> None:
     """label_columns / group_columns naming 'trial_id' is refused, not merged into the ids."""
-    file = _csv(tmp_path / "r.csv", "trial_id,fx\nA,1\nB,2\n")
+    file = _csv(tmp_path / "r.csv", "trial_id,fx\nA,1\nA,2\n")
     with pytest.raises(SourceFormatError) as info:
-        read_csv_dataset(file, sensor="x", **{role: ["trial_id"]})
+        read_csv_dataset(file, sensor="x", rate_hz=10.0, **{role: ["trial_id"]})
     assert (
         f"{role} names 'trial_id', which is slipkit's own trial id column in every "
         "dataset; rename the column"
