@@ -387,6 +387,23 @@ class GraspStability(Task):
             fams[str(name)] = clone(node) if hasattr(node, "fit") else instantiate(node)
         return fams
 
+    def _baselines(self, X: np.ndarray, n_e: int) -> dict[str, Any]:
+        """Mean electrode value (counts) per orientation and sensor of 24 electrodes:
+        how far the orientation alone shifts the readings."""
+        if self.orientation is None:
+            return {}
+        out: dict[str, Any] = {}
+        size = n_e // 3
+        for k, name in enumerate(self.orientations):
+            rows = X[:, n_e + k] > 0.5
+            if rows.any():
+                E = X[rows, :n_e]
+                out[str(name)] = {
+                    f"sensor{j + 1}": float(E[:, j * size : (j + 1) * size].mean())
+                    for j in range(3)
+                }
+        return out
+
     # -- scoring ----------------------------------------------------------------------
     def score(
         self, model: Any, X: np.ndarray, y: np.ndarray, trials: pd.DataFrame
@@ -529,6 +546,7 @@ class GraspStability(Task):
             },
             "selection": selection,
             "validation": validation,
+            "orientation_baseline_counts": self._baselines(X[tr], n_e),
             "normalisation": _normalisation_table(records),
             "normalisation_at_best": {
                 mode: {
@@ -617,6 +635,11 @@ def _summary(metrics: Mapping[str, Any]) -> list[str]:
             f"    {o:<10} n={m['n']:<5} accuracy {m['accuracy']:.4f}, balanced "
             f"{m['balanced_accuracy']:.4f} (majority "
             f"{maj['per_orientation'][o]:.4f})"
+        )
+    for o, b in metrics["orientation_baseline_counts"].items():
+        lines.append(
+            f"  mean electrode (counts, training grasps) {o:<10} "
+            + ", ".join(f"{k} {v:.0f}" for k, v in b.items())
         )
     lines.append(
         f"  orientation handling with the chosen {metrics['model']} parameters "
