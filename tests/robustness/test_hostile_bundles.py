@@ -32,6 +32,7 @@ from slipkit.errors import SlipkitError
 from slipkit.runtime import (
     BundleError,
     FrameError,
+    ReplaySource,
     StreamLoop,
     UdpSender,
     UdpSource,
@@ -290,6 +291,16 @@ def test_moderately_nested_manifest_is_refused_naming_the_depth(bundle: Path) ->
         load_bundle(bundle)
 
 
+def test_a_field_name_with_a_newline_stays_on_one_line(bundle: Path) -> None:
+    """An unknown key holding CR / LF / NUL is named escaped, so the message stays one line (found by Hypothesis)."""
+    edit_manifest(bundle, _set("frame.\r\nx\x00", None))
+    with pytest.raises(BundleError) as info:
+        load_bundle(bundle)
+    assert ["frame.\r\nx\x00"] == [info.value.field]
+    assert 1 == len(str(info.value).splitlines())
+    assert "field 'frame.\\r\\nx\\x00'" in str(info.value)
+
+
 # -- the graph against the manifest ------------------------------------------------------
 @pytest.mark.parametrize(
     ("model", "field"),
@@ -344,6 +355,40 @@ def test_a_short_loop_passes_the_deadline(bundle: Path) -> None:
             )[0]
         ).item()
     )
+
+
+def _value_dependent_graph() -> bytes:
+    """Gathers entry ``int(sum(X))`` of a 2-entry table: fine on zeros, fails on large frames."""
+    table = numpy_helper.from_array(np.array([[0.5], [1.5]], np.float32), "T")
+    return _graph(
+        [
+            helper.make_node("ReduceSum", ["X"], ["s"], keepdims=0),
+            helper.make_node("Cast", ["s"], ["i"], to=TensorProto.INT64),
+            helper.make_node("Gather", ["T", "i"], ["g"], axis=0),
+            helper.make_node("Reshape", ["g", "shape"], ["score"]),
+        ],
+        [helper.make_tensor_value_info("score", TensorProto.FLOAT, [1, 1])],
+        initializer=[
+            table,
+            numpy_helper.from_array(np.array([1, 1], np.int64), "shape"),
+        ],
+    )
+
+
+def test_onnxruntime_error_on_a_later_frame_names_the_model_and_frame(
+    bundle: Path,
+) -> None:
+    """A graph that fails only on some frames stops the loop with a BundleError naming model.onnx and the frame."""
+    _swap_graph(bundle, _value_dependent_graph())
+    loaded = load_bundle(bundle)
+    frames = np.zeros((10, 3), np.float32)
+    frames[6:] = 1e6  # standardised, the window sum is far past the table
+    source = ReplaySource(frames, np.arange(10) / 100.0)
+    with pytest.raises(
+        BundleError, match=r"onnxruntime failed on stream frame 6: "
+    ) as info:
+        StreamLoop(loaded).run(source)
+    assert str(bundle / "model.onnx") == info.value.file
 
 
 # -- replay files ------------------------------------------------------------------------
@@ -770,7 +815,5 @@ def test_any_mutated_manifest_loads_or_is_a_bundle_error(
     assert 20 == result.n_frames
 
 
-def _replay(base: LinearCase) -> Any:
-    from slipkit.runtime import ReplaySource
-
+def _replay(base: LinearCase) -> ReplaySource:
     return ReplaySource(base.frames[:20], base.timestamps[:20])

@@ -10,6 +10,17 @@ from __future__ import annotations
 from slipkit.errors import SlipkitError
 
 
+def printable(text: str) -> str:
+    """``text`` with every non-printable character escaped (``\\n``, ``\\x00``).
+
+    A field name, file name or value from a hostile file may hold a newline; an
+    error message must stay one line.
+    """
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
 class BundleError(SlipkitError, ValueError):
     """A bundle folder is incomplete, tampered with, or its manifest breaks the schema.
 
@@ -29,7 +40,7 @@ class BundleError(SlipkitError, ValueError):
         self.field = field
         self.problem = problem
         where = file if field is None else f"{file}: field '{field}'"
-        super().__init__(f"{where}: {problem}")
+        super().__init__(printable(f"{where}: {problem}"))
 
 
 class FrameError(SlipkitError, ValueError):
@@ -46,7 +57,7 @@ class FrameError(SlipkitError, ValueError):
     def __init__(self, where: str, problem: str) -> None:
         self.where = where
         self.problem = problem
-        super().__init__(f"{where}: {problem}")
+        super().__init__(printable(f"{where}: {problem}"))
 
 
 class OptionError(SlipkitError, ValueError):
@@ -63,4 +74,4 @@ class OptionError(SlipkitError, ValueError):
     def __init__(self, option: str, problem: str) -> None:
         self.option = option
         self.problem = problem
-        super().__init__(f"{option}: {problem}")
+        super().__init__(printable(f"{option}: {problem}"))

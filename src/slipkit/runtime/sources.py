@@ -9,7 +9,8 @@ Replay files
 ------------
 ``.npz`` (what exporters put in a bundle as ``replay.npz``): ``frames`` of shape
 ``(n, *frame.shape)`` (or ``(n, n_values)``) and ``timestamps`` of shape ``(n,)`` in s,
-non-decreasing; read with ``allow_pickle=False``. ``.npy``: ``frames`` only; the
+non-decreasing; read with numpy's ``.npy`` header reader, never a pickle, every size
+checked before anything is allocated (:func:`load_replay`). ``.npy``: ``frames`` only; the
 timestamps are ``index / frame.rate_hz``.
 
 UDP frame format (version 1)
