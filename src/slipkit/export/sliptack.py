@@ -606,12 +606,14 @@ def export_speed_slip_detector(
 def main() -> None:
     """Print parity and per-call time of the speed graph on simulated recordings.
 
-    ``python -m slipkit.export.sliptack``: the ``sliptack_frequency`` detector config
+    ``python -m slipkit.export.sliptack [key=value ...]``: the ``sliptack_frequency``
+    detector config (each ``key=value`` overrides ``detector.key``)
     (physics stick length, friction 0.55 / 0.45), 12 ``sliptack_pull`` trials (seed 1);
     per ``dft_dtype``: speed parity at the runtime's call instants (relative |diff|
     where both are defined, calls where only one is) and decision agreement at 0 and
     30 mm/s; time = median and p99 of 2000 batch-1 onnxruntime calls (one thread).
     """
+    import sys
     import time
 
     from hydra import compose, initialize_config_dir
@@ -626,8 +628,12 @@ def main() -> None:
     )
     from slipkit.export.parity import onnx_session
 
+    # extra arguments override the detector config, e.g. ``interpolate=false``
+    extra = [f"detector.{arg}" for arg in sys.argv[1:]]
     with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
-        cfg = compose(config_name="train", overrides=["experiment=sliptack_speed"])
+        cfg = compose(
+            config_name="train", overrides=["experiment=sliptack_speed", *extra]
+        )
     GlobalHydra.instance().clear()
     est = instantiate(cfg.detector).fit(np.zeros((1, 1)), np.full(1, np.nan))
     ds = _simulate("sliptack_pull", 12, 1)
