@@ -28,7 +28,7 @@ from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
 from sklearn.svm import SVC
 from sklearn.utils._param_validation import Interval, StrOptions
-from sklearn.utils.validation import check_is_fitted, validate_data
+from sklearn.utils.validation import check_array, check_is_fitted, validate_data
 
 #: The paper's Table I Gaussian (dr, dtheta) hyper-parameters (MATLAB KernelScale
 #: and BoxConstraint), tuned by Bayesian optimisation on its own recordings.
@@ -65,6 +65,15 @@ class TacTipSVM(ClassifierMixin, BaseEstimator):
     class_weight : dict, "balanced" or None
         Per-class multiplier of ``C`` (``"balanced"``: inverse class frequency).
         'slip' frames are rare (4 per trial with ``n_slip=4``).
+    features : {"per_pin", "pooled"}
+        What the SVC sees. ``"per_pin"``: the rows as given (the paper's one feature
+        per pin and kind, tied to the pin count). ``"pooled"``: the rows must be
+        per-pin ``dr_dtheta`` features of any pin count, reduced to the six
+        pin-count-independent statistics of
+        :func:`slipkit.features.tactip.pooled_features` (pin speeds, resultant
+        length of the directions, mean velocity; missing pins ignored), so a model
+        trained on 127 pins scores 331. Use with ``standardize=True``: the
+        statistics mix mm/frame and a 0..1 ratio.
     random_state : int, RandomState or None
         Passed to the SVC. The SVC here never draws random numbers (it computes no
         Platt probabilities), so fits are deterministic; the parameter is kept so
@@ -75,7 +84,8 @@ class TacTipSVM(ClassifierMixin, BaseEstimator):
     classes_ : ndarray of shape (n_classes,)
         Class labels, sorted (``['slip', 'static']`` for TacTip frame labels).
     n_features_in_ : int
-        Number of features seen in ``fit``.
+        Number of features the SVC sees (with ``features="pooled"``: 6, whatever
+        the pin count of ``X``).
     feature_names_in_ : ndarray of str
         Feature names, when ``X`` was a DataFrame with string column names.
     svc_ : SVC
@@ -111,6 +121,7 @@ class TacTipSVM(ClassifierMixin, BaseEstimator):
         ],
         "standardize": ["boolean"],
         "class_weight": [StrOptions({"balanced"}), dict, None],
+        "features": [StrOptions({"per_pin", "pooled"})],
         "random_state": ["random_state"],
     }
 
@@ -122,6 +133,7 @@ class TacTipSVM(ClassifierMixin, BaseEstimator):
         gamma: float | str = 1.0 / PAPER_KERNEL_SCALE**2,
         standardize: bool = False,
         class_weight: dict[Any, float] | str | None = None,
+        features: str = "per_pin",
         random_state: int | np.random.RandomState | None = None,
     ) -> None:
         self.kernel = kernel
@@ -129,7 +141,21 @@ class TacTipSVM(ClassifierMixin, BaseEstimator):
         self.gamma = gamma
         self.standardize = standardize
         self.class_weight = class_weight
+        self.features = features
         self.random_state = random_state
+
+    @property
+    def pin_count_independent(self) -> bool:
+        """True when any pin count can be scored (``features="pooled"``)."""
+        return self.features == "pooled"
+
+    def _pool(self, X: ArrayLike) -> ArrayLike:
+        if self.features != "pooled":
+            return X
+        # Pooled statistics of any pin count: the width check is pooled_features's.
+        from slipkit.features.tactip import pooled_features
+
+        return pooled_features(check_array(X, dtype=np.float64))
 
     @classmethod
     def from_kernel_scale(cls, kernel_scale: float, **params: Any) -> TacTipSVM:
@@ -189,7 +215,7 @@ class TacTipSVM(ClassifierMixin, BaseEstimator):
         TacTipSVM
             self, fitted.
         """
-        X, y = validate_data(self, X, y, dtype=np.float64, order="C")
+        X, y = validate_data(self, self._pool(X), y, dtype=np.float64, order="C")
         Xt: NDArray[np.float64] = np.asarray(X)
         self.scaler_: StandardScaler | None = None
         if self.standardize:
@@ -218,7 +244,7 @@ class TacTipSVM(ClassifierMixin, BaseEstimator):
         check_is_fitted(self)
         # reset=False: keep n_features_in_ from fit, only check the shape and names.
         return np.asarray(
-            validate_data(self, X, reset=False, dtype=np.float64, order="C")
+            validate_data(self, self._pool(X), reset=False, dtype=np.float64, order="C")
         )
 
     def decision_function(self, X: ArrayLike) -> NDArray[np.float64]:

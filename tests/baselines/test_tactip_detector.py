@@ -1,0 +1,107 @@
+"""The analytic TacTip detector (pooled pin motion) and the pooled pin features."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from slipkit.baselines.tactip import PinMotionDetector
+from slipkit.features.tactip import POOLED_NAMES, pooled_features
+
+
+def stretch_then_snap(
+    n_pins: int, *, n: int = 80, onset: int = 50, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray]:
+    """Pins (n, 2 N) that creep along -y until ``onset`` then snap back along +y, with jitter."""
+    rng = np.random.default_rng(seed)
+    rest = rng.uniform(-5, 5, size=(2, n_pins))
+    vy = np.where(np.arange(n) < onset, -0.01, 0.0)
+    vy[onset : onset + 4] = 0.05
+    y_shift = np.cumsum(vy)
+    frames = np.empty((n, 2 * n_pins))
+    frames[:, :n_pins] = rest[0] + rng.normal(0, 0.005, (n, n_pins))
+    frames[:, n_pins:] = rest[1] + y_shift[:, None] + rng.normal(0, 0.005, (n, n_pins))
+    labels = (np.arange(n) >= onset).astype(int)
+    return frames, labels
+
+
+def test_reversal_fires_at_the_snap_back_not_during_the_stretch() -> None:
+    """A steady stretch scores below the threshold; the snap-back against it crosses it."""
+    X, y = stretch_then_snap(37)
+    det = PinMotionDetector(threshold=0.02).fit(X, y)
+    pred = det.predict(X)
+    assert 0 == int(pred[:50].sum())
+    assert 51 == int(np.flatnonzero(pred)[0])  # two consecutive frames: onset + 1
+
+
+def test_coherent_score_also_fires_on_the_stretch() -> None:
+    """The |mean velocity| score sees an aligned stretch as motion (what reversal avoids)."""
+    X, y = stretch_then_snap(37)
+    det = PinMotionDetector(score="coherent", threshold=0.005).fit(X, y)
+    assert det.predict(X)[5:50].all()
+
+
+def test_fitted_on_one_pin_count_scores_another() -> None:
+    """A detector fitted on 127 pins scores 331-pin frames with the same decisions' timing."""
+    X127, y127 = stretch_then_snap(127)
+    X331, _ = stretch_then_snap(331, seed=1)
+    det = PinMotionDetector().fit(X127, y127)
+    assert 127 == det.n_pins_in_
+    assert 51 == int(np.flatnonzero(det.predict(X331))[0])
+
+
+def test_batch_equals_streaming_with_missing_pins() -> None:
+    """Batch and frame-by-frame scores agree, NaN pins and all, over two recordings."""
+    X, y = stretch_then_snap(19)
+    X[10, 3] = np.nan
+    X[30, [2, 21]] = np.nan
+    X[40, :] = np.nan  # every pin lost in one frame: no decision there
+    det = PinMotionDetector(lookback=5, gap=2).fit(
+        np.vstack([X, X]), np.r_[y, y], segments=np.r_[np.zeros(80), np.ones(80)]
+    )
+    batch = det.decision_function(X)
+    stream, _ = det.replay(X)
+    np.testing.assert_allclose(stream, batch, rtol=0, atol=1e-15)
+    assert np.isneginf(batch[40])
+
+
+def test_odd_channel_count_is_refused() -> None:
+    """Pin frames are x and y blocks: an odd number of channels is an error naming it."""
+    with pytest.raises(ValueError, match=r"even number of channels\); X has 5"):
+        PinMotionDetector(threshold=0.0).fit(np.zeros((30, 5)), np.zeros(30))
+
+
+def test_pooled_features_ignore_missing_pins() -> None:
+    """Pooled statistics count only pins with a velocity (dr > 0); all-aligned pins give R = 1."""
+    dr = np.array([[0.1, 0.3, 0.0, 0.2]])
+    theta = np.array([[0.5, 0.5, 2.0, 0.5]])
+    out = pooled_features(np.hstack([dr, theta]))[0]
+    expected = {
+        "speed_mean": 0.2,
+        "speed_rms": np.sqrt((0.01 + 0.09 + 0.04) / 3),
+        "speed_max": 0.3,
+        "resultant": 1.0,
+        "velocity_mean": 0.2,
+        "alignment": 0.2,
+    }
+    np.testing.assert_allclose(out, [expected[k] for k in POOLED_NAMES], atol=1e-12)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    n_pins=st.integers(1, 50),
+    angle=st.floats(-np.pi, np.pi),
+    seed=st.integers(0, 1000),
+)
+def test_pooled_features_are_rotation_invariant(
+    n_pins: int, angle: float, seed: int
+) -> None:
+    """Rotating every pin direction by one angle changes no pooled statistic."""
+    rng = np.random.default_rng(seed)
+    dr = rng.uniform(0, 1, (3, n_pins))
+    theta = rng.uniform(-np.pi, np.pi, (3, n_pins))
+    a = pooled_features(np.hstack([dr, theta]))
+    b = pooled_features(np.hstack([dr, theta + angle]))
+    np.testing.assert_allclose(b, a, atol=1e-9)
