@@ -150,6 +150,20 @@ MALFORMED: list[tuple[list[str], str]] = [
         ["train", "dataset.n_trials=2", "+model.bogus=1", "run_dir={tmp}/run"],
         "unexpected keyword argument 'bogus'",
     ),
+    (
+        ["train", "model.C=abc", "run_dir={tmp}/run"],
+        "model: The 'C' parameter of TacTipSVM must be a float in the range (0.0, inf). "
+        "Got 'abc' instead.",
+    ),
+    (
+        ["train", "experiment=fsr_roc", "detector.block=0", "run_dir={tmp}/run"],
+        "detector: The 'block' parameter of FSRTouchSlip must be an int in the range "
+        "[1, inf). Got 0 instead.",
+    ),
+    (
+        ["train", "dataset.n_trials=4", "task.test_size=abc", "run_dir={tmp}/run"],
+        "test_size must be a number in [0, 1); got 'abc'",
+    ),
     # evaluate
     (["evaluate"], "run=...: missing; this option is required"),
     (["evaluate", "run={tmp}/run"], "dataset=...: missing; this option is required"),
@@ -180,6 +194,16 @@ MALFORMED: list[tuple[list[str], str]] = [
         "cost.max_frames=0: expected a whole number >= 1",
     ),
     (["compare", "cost.export=no"], "cost.export=no: expected true or false"),
+    (
+        [
+            "compare",
+            "comparison=fsr",
+            "comparison.estimators.fsr_paper.threshold=abc",
+            "out={tmp}/cmp",
+        ],
+        "comparison.estimators.fsr_paper: The 'threshold' parameter of FSRTouchSlip "
+        "must be an instance of 'float' or None. Got 'abc' instead.",
+    ),
     # demo (out= under tmp_path even though nothing may be written)
     (["demo", "out={tmp}/demo", "quick=maybe"], "quick=maybe: expected true or false"),
     (

@@ -286,7 +286,7 @@ def check_estimators(comp: dict[str, Any], cfg: DictConfig) -> None:
     SlipkitError
         Naming the comparison, the estimator and why it cannot run.
     """
-    from slipkit.train.commands import build
+    from slipkit.train.commands import build, check_params
     from slipkit.train.data import training_dataset
 
     name = comp.get("name")
@@ -324,10 +324,12 @@ def check_estimators(comp: dict[str, Any], cfg: DictConfig) -> None:
                     f"{where} ({cls.__name__}) cannot run in this family's task: "
                     f"{type(task).__name__} {feeds}"
                 )
-        build(
-            OmegaConf.create({k: v for k, v in node.items() if k != "_partial_"}),
-            "model",
-        )  # a constructor refusing its config fails here, not after other trainings
+        # A constructor or parameter refusing its config fails here, not after
+        # other estimators have trained.
+        check_params(
+            build(OmegaConf.create(node), "model"),
+            f"comparison.estimators.{est}",
+        )
         plans.append((est, node, task))
     if tcfg is None:
         return

@@ -63,8 +63,9 @@ class BlockSplit:
 
 
 def _check_fraction(name: str, value: float) -> None:
-    if not 0.0 <= value < 1.0:
-        raise SplitError(f"{name} must be in [0, 1); got {value}")
+    number = isinstance(value, int | float) and not isinstance(value, bool)
+    if not number or not 0.0 <= value < 1.0:
+        raise SplitError(f"{name} must be a number in [0, 1); got {value!r}")
 
 
 def _check_enough(n: int, unit: str, test_size: float, val_size: float) -> None:

@@ -114,6 +114,7 @@ def train_main(cfg: DictConfig) -> float:
             start = time.perf_counter()
             task: Task = build(cfg.task, "task")
             model = build(estimator_node(cfg), "model")
+            check_params(model, "detector" if cfg.get("detector") else "model")
             dataset = training_dataset(cfg)
             log.info("dataset: %r", dataset)
             check_trainable(dataset, task)
@@ -229,6 +230,25 @@ def _dataset_info(dataset: Any, cfg: DictConfig) -> dict[str, Any]:
             for name, spec in sorted(dataset.streams.items())
         },
     }
+
+
+def check_params(model: Any, what: str) -> None:
+    """Check an estimator's hyper-parameters against its ``_parameter_constraints``
+    before any data is built or fitted (scikit-learn checks them only in ``fit``).
+
+    Raises
+    ------
+    SlipkitError
+        ``<what>: The 'C' parameter of TacTipSVM must be ...`` (scikit-learn's message).
+    """
+    if not hasattr(model, "_parameter_constraints"):
+        return
+    from sklearn.utils._param_validation import InvalidParameterError
+
+    try:
+        model._validate_params()
+    except InvalidParameterError as exc:
+        raise SlipkitError(f"{what}: {exc}") from None
 
 
 #: task options naming the stream(s) an estimator reads (their channels must match)
@@ -421,6 +441,7 @@ def evaluate_main(cfg: DictConfig) -> Path:
 
 __all__ = [
     "check_fits_run",
+    "check_params",
     "check_trainable",
     "evaluate_main",
     "seed_everything",
