@@ -265,14 +265,22 @@ def test_onnx_graph_agrees_for_either_polarity(polarity: str) -> None:
     assert (True, 0) == (report["passed"], report["n_finite_mismatch"])
 
 
-def test_confirmed_variant_does_not_export() -> None:
-    """The confirmed variant has no graph yet: a clear ExportError, not a wrong graph."""
-    from slipkit.export.detectors import export_fsr_touch_slip
-    from slipkit.export.registry import ExportError
+@pytest.mark.parametrize("polarity", ["falling", "rising"])
+def test_confirmed_graph_agrees_on_slides_and_bumps(polarity: str) -> None:
+    """The confirmed variant's graph (k-th largest peak over the window) passes parity, slides and bumps."""
+    from slipkit.export.detectors import check_detector_parity, export_fsr_touch_slip
 
-    det = fit_on_slides("falling", **ROBUST)
-    with pytest.raises(ExportError, match="confirm_events=2"):
-        export_fsr_touch_slip(det)
+    det = fit_on_slides(polarity, **ROBUST)
+    trials = fsr_trials(400, 2, polarity=polarity, slide=True) + fsr_trials(
+        401, 2, polarity=polarity, slide=False
+    )
+    X, _, seg = stack(trials)
+    graph = export_fsr_touch_slip(det)
+    report = check_detector_parity(det, graph, X, segments=seg)
+    assert (645, 2) == (graph.window, graph.features["confirm_events"])
+    assert (True, 0) == (report["passed"], report["n_finite_mismatch"])
+    assert report["max_abs_diff"] <= 1e-3 * det.threshold_
+    assert det.predict(X, segments=seg).any()  # the comparison includes slip decisions
 
 
 # -- sharp bumps ------------------------------------------------------------------------------

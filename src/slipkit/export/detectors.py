@@ -321,14 +321,18 @@ def export_fsr_touch_slip(
         sample (14 for 10 rest samples and 5-sample blocks).
     """
     check_is_fitted(detector, "threshold_")
-    if int(detector.confirm_events) > 1:
+    confirm = int(detector.confirm_events) > 1
+    if confirm and not gate:
         raise ExportError(
-            f"FSR export: confirm_events={detector.confirm_events} (the confirmed, "
-            "bump-robust variant) has no ONNX graph yet; only the paper's one-block "
-            "rule (confirm_events=1) exports"
+            "FSR export: the confirmed variant (confirm_events > 1) needs the touch gate "
+            "(gate=True): its batch form only counts touched blocks"
         )
     b = int(detector.block)
-    w = 2 * b
+    gap, wb = detector._peak_gap, detector._confirm_blocks
+    # confirmed: the blocks whose derivative a peak in the window needs (wb candidates,
+    # gap on each side) plus the first one's predecessor
+    n_blocks = wb + 2 * gap + 1 if confirm else 2
+    w = n_blocks * b
     sign = detector._sign
     polarity = detector._polarity
     per_s = detector._per_s
@@ -361,6 +365,11 @@ def export_fsr_touch_slip(
         for p in coeffs[1:-1]:
             acc = g.op("Mul", g.op("Add", acc, g.const(p, np.float64)), v)
         v = g.op("Add", acc, g.const(coeffs[-1], np.float64), stem="force")
+    if confirm:
+        score64 = _fsr_confirmed(g, v, detector, n_blocks, rest_sig, delta)
+        return _fsr_graph_out(
+            g, inp, score64, detector, w, v_rest, rest_sig, delta, gate, polarity
+        )
     blocks = g.op("Reshape", v, g.const([-1, 2, b], np.int64), stem="blocks")
     means = g.op(
         "Div",
@@ -385,13 +394,134 @@ def export_fsr_touch_slip(
         touched = g.op("Greater", press, g.const(delta, np.float64), stem="touched")
         ok = g.op("And", ok, touched)
     score64 = g.op("Where", ok, deriv, g.const(NO_SCORE, np.float64), stem="score64")
+    return _fsr_graph_out(
+        g, inp, score64, detector, w, v_rest, rest_sig, delta, gate, polarity
+    )
+
+
+#: Below every finite block score: the confirmed graph's "no derivative here" (the batch
+#: detector's -inf), finite so that maxima and comparisons never meet inf - inf.
+_NO_BLOCK = -1e300
+
+
+def _fsr_confirmed(
+    g: GraphBuilder,
+    v: str,
+    detector: FSRTouchSlip,
+    n_blocks: int,
+    rest_sig: float,
+    delta: float,
+) -> str:
+    """Nodes of the confirmed score: the ``confirm_events``-th largest derivative peak
+    among the ``_confirm_blocks`` candidates of the window (``FSRTouchSlip._confirmed``)."""
+    b, gap, wb = int(detector.block), detector._peak_gap, detector._confirm_blocks
+    k, sign = int(detector.confirm_events), detector._sign
+    nd = n_blocks - 1  # block derivatives in the window, oldest first
+    blocks = g.op("Reshape", v, g.const([-1, n_blocks, b], np.int64), stem="blocks")
+    means = g.op(
+        "Div",
+        g.op("ReduceSum", blocks, _axes(g, 2), keepdims=0),
+        g.const(float(b), np.float64),
+        stem="means",
+    )  # (batch, n_blocks)
+
+    def cols(t: str, start: int, stop: int) -> str:
+        i64 = np.int64
+        return g.op(
+            "Slice", t, g.const([start], i64), g.const([stop], i64), _axes(g, 1)
+        )
+
+    last = cols(means, 1, n_blocks)
+    deriv = g.op(
+        "Mul",
+        g.op("Sub", last, cols(means, 0, nd)),
+        g.const(sign * float(detector._per_s), np.float64),
+        stem="deriv",
+    )  # (batch, nd)
+    press = g.op(
+        "Mul",
+        g.op("Sub", g.const(rest_sig, np.float64), last),
+        g.const(sign, np.float64),
+        stem="press",
+    )
+    ok = g.op(
+        "And",
+        g.op("Not", _not_finite(g, deriv)),
+        g.op("Greater", press, g.const(delta, np.float64)),
+        stem="touched_finite",
+    )
+    d = g.op("Where", ok, deriv, g.const(_NO_BLOCK, np.float64), stem="block_score")
+    # max over each run of `gap` blocks: m[j] = max(d[j .. j + gap - 1])
+    run_max = g.op(
+        "Reshape",
+        g.op(
+            "MaxPool",
+            g.op("Unsqueeze", d, _axes(g, 1)),
+            kernel_shape=[gap],
+            strides=[1],
+        ),
+        g.const([-1, nd - gap + 1], np.int64),
+        stem="run_max",
+    )
+    # candidates j = gap .. gap + wb - 1: left = m[j - gap], right = m[j + 1]
+    mid = cols(d, gap, gap + wb)
+    left = cols(run_max, 0, wb)
+    right = cols(run_max, gap + 1, gap + 1 + wb)
+    peak = g.op(
+        "And",
+        g.op("Greater", mid, left),
+        g.op("GreaterOrEqual", mid, right),
+        stem="peak",
+    )
+    pv = g.op("Where", peak, mid, g.const(_NO_BLOCK, np.float64), stem="peak_score")
+    top, idx = g._fresh("top"), g._fresh("top_idx")
+    g.nodes.append(
+        helper.make_node(
+            "TopK",
+            [pv, g.const([k], np.int64)],
+            [top, idx],
+            axis=1,
+            largest=1,
+            sorted=1,
+        )
+    )
+    kth = g.op("Reshape", cols(top, k - 1, k), g.const([-1], np.int64), stem="kth")
+    return g.op(
+        "Where",
+        g.op("Greater", kth, g.const(_NO_BLOCK, np.float64)),
+        kth,
+        g.const(NO_SCORE, np.float64),
+        stem="score64",
+    )
+
+
+def _fsr_graph_out(
+    g: GraphBuilder,
+    inp: onnx.ValueInfoProto,
+    score64: str,
+    detector: FSRTouchSlip,
+    w: int,
+    v_rest: float,
+    rest_sig: float,
+    delta: float,
+    gate: bool,
+    polarity: str,
+) -> DetectorGraph:
+    b = int(detector.block)
+    sign = detector._sign
+    confirm = int(detector.confirm_events) > 1
     unit = "V/s" if detector.input == "voltage" else "N/s"
+    what = (
+        f"the {detector.confirm_events}-th largest derivative peak of the "
+        f"{detector._confirm_blocks} blocks before the last {detector._peak_gap}"
+        if confirm
+        else f"signed derivative of the last two {b}-sample block means"
+    )
     model = _finish(
         g,
         inp,
         score64,
-        f"FSRTouchSlip ({detector.input}) over {w} samples: signed derivative of the "
-        f"last two {b}-sample block means ({unit})"
+        f"FSRTouchSlip ({detector.input}) over {w} samples: {what} ({unit})"
         + (f", NO_SCORE unless touched against v_rest = {v_rest:g} V" if gate else ""),
     )
     import scipy
@@ -415,6 +545,9 @@ def export_fsr_touch_slip(
         features={
             "input": detector.input,
             "polarity": polarity,
+            "confirm_events": int(detector.confirm_events),
+            "confirm_blocks": int(detector._confirm_blocks) if confirm else 0,
+            "peak_gap_blocks": int(detector._peak_gap) if confirm else 0,
             "block": b,
             "rate_hz": float(detector.rate_hz),
             "gate": bool(gate),
@@ -971,6 +1104,9 @@ def main() -> None:
         rows.append(
             (f"FSRTouchSlip ({input_})", det, export_fsr_touch_slip(det), Xh, sh)
         )
+    # the confirmed variant (configs/detector/fsr_robust.yaml: 2 peaks within 0.3 s)
+    det = FSRTouchSlip(confirm_events=2).fit(X, y, segments=seg)
+    rows.append(("FSRTouchSlip (confirmed)", det, export_fsr_touch_slip(det), Xh, sh))
     fit_ds, held = (
         _simulate("biotac_lift_slip", 3, 5),
         _simulate("biotac_lift_slip", 3, 6),
