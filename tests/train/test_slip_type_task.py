@@ -132,7 +132,7 @@ def test_train_and_evaluate_end_to_end_on_the_simulated_lift(tmp_path, capsys):
     metrics = json.loads((run / "metrics.json").read_text())
     assert objective == pytest.approx(metrics["accuracy"])
     assert 0.0 <= metrics["accuracy"] <= 1.0
-    assert {"first_frame", "dynamics"} == set(metrics["controls"])
+    assert {"first_frame", "dynamics", "majority"} == set(metrics["controls"])
     assert ["cnn"] == list(metrics["compare"])
     assert [10, 30] == [r["frames"] for r in metrics["accuracy_vs_width"]]
     for name in ("accuracy_vs_time", "accuracy_vs_width"):

@@ -5,7 +5,8 @@ Su et al. 2015 (Sec. IV-C) classify linear versus rotational slip from a window 
 "one hidden layer with 50 neurons [...] a sigmoid transfer function [and] softmax
 [...] in the output neurons" (:class:`WindowMLP`). :class:`WindowCNN` reads the same
 flattened window as ``W`` frames of ``C`` electrodes and convolves over time, to show
-what a temporal model buys and costs (``n_parameters_``, ``flops_per_window_``).
+what a temporal model buys and costs (``n_parameters_``, ``flops_per_window_``);
+:class:`WindowGRU` steps a GRU through the window frame by frame.
 
 Both are scikit-learn classifiers around :class:`skorch.NeuralNetClassifier`, which
 gives the training loop, early stopping on a validation split and the estimator API
@@ -40,7 +41,14 @@ from skorch.helper import predefined_split
 from torch import nn
 from torch.utils.flop_counter import FlopCounterMode
 
-__all__ = ["MLPModule", "TemporalCNNModule", "WindowCNN", "WindowMLP"]
+__all__ = [
+    "GRUModule",
+    "MLPModule",
+    "TemporalCNNModule",
+    "WindowCNN",
+    "WindowGRU",
+    "WindowMLP",
+]
 
 _ACTIVATIONS: dict[str, type[nn.Module]] = {
     "sigmoid": nn.Sigmoid,
@@ -121,6 +129,60 @@ class TemporalCNNModule(nn.Module):
         # (N, W*C) time-major -> (N, W, C) -> (N, C, W): electrodes as channels.
         z = x.reshape(-1, self.width, self.n_channels).transpose(1, 2)
         return self.head(self.conv(z).mean(dim=-1))
+
+
+class GRUModule(nn.Module):
+    """Flattened window -> (W, C) -> a GRU stepping frame by frame -> last state -> softmax.
+
+    Each window starts from a zero hidden state: no state is carried from one
+    window (or one call of the runtime) to the next, so the exported graph is
+    "whole window in, class out" like the other window models.
+
+    Parameters
+    ----------
+    n_channels, width, n_classes : int
+        Electrodes C, frames per window W, classes.
+    hidden_units, n_layers : int
+        GRU state size and stacked layers.
+    """
+
+    def __init__(
+        self,
+        n_channels: int,
+        width: int,
+        n_classes: int,
+        hidden_units: int = 32,
+        n_layers: int = 1,
+    ) -> None:
+        super().__init__()
+        self.n_channels = n_channels
+        self.width = width
+        self.hidden_units = hidden_units
+        self.n_layers = n_layers
+        self.n_classes = n_classes
+        self.gru = nn.GRU(n_channels, hidden_units, n_layers, batch_first=True)
+        self.head = nn.Sequential(
+            nn.Linear(hidden_units, n_classes), nn.Softmax(dim=-1)
+        )
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        # (N, W*C) time-major -> (N, W, C): one GRU step per frame.
+        out, _ = self.gru(x.reshape(-1, self.width, self.n_channels))
+        return self.head(out[:, -1])
+
+    def flops_per_window(self) -> int:
+        """Multiply-adds (x 2) of the GRU gates over W frames and of the head.
+
+        torch's FLOP counter does not count the fused GRU kernel, so this is the
+        closed form: per frame and layer, three gates of ``in x h + h x h`` weights.
+        """
+        h = self.hidden_units
+        per_step = 0
+        c_in = self.n_channels
+        for _ in range(self.n_layers):
+            per_step += 2 * 3 * (c_in * h + h * h)
+            c_in = h
+        return int(self.width * per_step + 2 * h * self.n_classes)
 
 
 class _WindowNet(ClassifierMixin, BaseEstimator):
@@ -325,6 +387,8 @@ def _flops_per_window(module: nn.Module, n_features: int) -> int:
     Counts multiply-adds of matrix products and convolutions as 2 FLOPs (activations,
     softmax and the input scaling are left out: a few per input).
     """
+    if isinstance(module, GRUModule):
+        return module.flops_per_window()
     with torch.no_grad(), FlopCounterMode(display=False) as counter:
         module(torch.zeros(1, n_features))
     return int(counter.get_total_flops())
@@ -516,5 +580,87 @@ class WindowCNN(_WindowNet):
             "n_classes": n_classes,
             "filters": self.filters,
             "kernel_size": self.kernel_size,
+            "n_layers": self.n_layers,
+        }
+
+
+class WindowGRU(_WindowNet):
+    """A recurrent temporal model: a GRU steps through the window's frames, electrodes as inputs.
+
+    Takes the same flattened window as :class:`WindowMLP`, reads it as ``W`` frames
+    of ``n_channels`` and classifies from the GRU's state after the last frame.
+    The state starts at zero for every window (none is carried between windows);
+    the ONNX graph (:mod:`slipkit.export.torch`) is "whole window in, class out".
+
+    Parameters
+    ----------
+    n_channels : int
+        Channels per frame (19 BioTac, 24 BioTac SP).
+    hidden_units : int
+        GRU state size.
+    n_layers : int
+        Stacked GRU layers.
+    lr, weight_decay, max_epochs, batch_size, patience, validation_fraction, standardize, num_threads, random_state
+        As in :class:`WindowMLP`.
+
+    Attributes
+    ----------
+    classes_, n_features_in_, scaler_, net_, module_, validated_, n_epochs_, best_epoch_, n_parameters_, flops_per_window_
+        As in :class:`WindowMLP` (FLOPs in closed form: :meth:`GRUModule.flops_per_window`).
+    width_ : int
+        Frames per window, ``n_features_in_ / n_channels``.
+    """
+
+    _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
+        **_WindowNet._parameter_constraints,
+        "n_channels": [Interval(Integral, 1, None, closed="left")],
+        "hidden_units": [Interval(Integral, 1, None, closed="left")],
+        "n_layers": [Interval(Integral, 1, None, closed="left")],
+    }
+
+    def __init__(
+        self,
+        *,
+        n_channels: int = 19,
+        hidden_units: int = 32,
+        n_layers: int = 1,
+        lr: float = 3e-3,
+        weight_decay: float = 0.0,
+        max_epochs: int = 60,
+        batch_size: int = 128,
+        patience: int = 8,
+        validation_fraction: float = 0.2,
+        standardize: bool = True,
+        num_threads: int | None = 1,
+        random_state: int | np.random.RandomState | None = 0,
+    ) -> None:
+        self.n_channels = n_channels
+        self.hidden_units = hidden_units
+        self.n_layers = n_layers
+        self.lr = lr
+        self.weight_decay = weight_decay
+        self.max_epochs = max_epochs
+        self.batch_size = batch_size
+        self.patience = patience
+        self.validation_fraction = validation_fraction
+        self.standardize = standardize
+        self.num_threads = num_threads
+        self.random_state = random_state  # type: ignore[assignment]
+
+    def _module(
+        self, n_features: int, n_classes: int
+    ) -> tuple[type[nn.Module], dict[str, Any]]:
+        if n_features % self.n_channels:
+            raise ValueError(
+                f"{type(self).__name__}: {n_features} inputs per window is not a "
+                f"multiple of n_channels={self.n_channels}; set n_channels to the "
+                "stream's channel count"
+            )
+        self.width_ = n_features // self.n_channels
+        return GRUModule, {
+            "n_channels": self.n_channels,
+            "width": self.width_,
+            "n_classes": n_classes,
+            "hidden_units": self.hidden_units,
             "n_layers": self.n_layers,
         }

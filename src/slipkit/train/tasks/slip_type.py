@@ -8,20 +8,30 @@ class and known by the time of its last frame. Trials (never windows) are split:
 stratified by class, or by a group (``object``: the test objects are unseen), once or
 in ``folds`` so that every trial is tested once by a model that never saw it.
 
-Reported: per-window accuracy on the test side (the objective, ``accuracy``), per-class
-recall and confusion, sequence accuracy (majority vote over a trial's windows), two
-controls fitted as separate clones of the model - *first frame only* (each window
-replaced by its trial's first frame: what the static contact alone predicts) and
-*dynamics only* (each frame minus the trial's, or the window's, first frame) -,
-accuracy against the time of the window's last frame (relative to the slip onset when
-the dataset labels it: the paper's Fig. 10; else to the trial start), accuracy against
-the window length (each length refitted), and optional other models on the same split.
+Reported: per-window accuracy on the test side (the objective, ``accuracy``), balanced
+accuracy, per-class recall and confusion, the same per sequence (majority vote over a
+trial's windows), three controls - *first frame only* (each window replaced by its
+trial's first frame: what the static contact alone predicts), *dynamics only* (each
+frame minus the trial's, or the window's, first frame), both fitted as clones of the
+model, and the *majority class* of the training side -, accuracy against the time of
+the window's last frame (relative to the slip onset when the dataset labels it: the
+paper's Fig. 10; else to the trial start), accuracy against the window length (each
+length refitted), and optional other models on the same split.
+
+Model selection without leaks: a model that chooses among candidates
+(:class:`slipkit.models.selection.CandidateSearch`) is fitted once per outer fold on
+that fold's training windows, with ``groups`` = each window's object, so its
+leave-one-object-out CV never sees a test object (nested CV). The controls and the
+width sweep refit what each fold chose rather than selecting again. The saved model
+selects again by leave-one-object-out CV over every object and is refitted on all.
+Each finished fold prints a progress line on stderr (step i of n, fold, elapsed, ETA).
 """
 
 from __future__ import annotations
 
-import inspect
 import logging
+import sys
+import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,6 +40,7 @@ from typing import Any, cast
 import numpy as np
 import pandas as pd
 from sklearn.base import clone
+from sklearn.dummy import DummyClassifier
 from sklearn.model_selection import GroupKFold, StratifiedGroupKFold
 
 from slipkit.data.dataset import Dataset
@@ -44,6 +55,7 @@ from slipkit.features.windows import (
     frames_for_ms,
     sliding_windows,
 )
+from slipkit.models.selection import fit_with_groups
 from slipkit.train.task import Task, TaskResult
 
 log = logging.getLogger("slipkit.slip_type")
@@ -66,19 +78,30 @@ class WindowSet:
     t_rel : ndarray of float, shape (n_windows,)
         Time of the window's last frame, s, relative to the trial's slip onset (or
         to the trial start when the task has no onset label).
+    group : ndarray of str, shape (n_windows,)
+        What a model's inner cross-validation and early-stopping split keep whole:
+        the window's object (the task's ``group``) under ``split="group"``, else its
+        trial.
     """
 
     X: np.ndarray
     y: np.ndarray
     trial: np.ndarray
     t_rel: np.ndarray
+    group: np.ndarray
 
     def __len__(self) -> int:
         return len(self.y)
 
     def take(self, mask: np.ndarray) -> WindowSet:
         """The windows where ``mask`` is true."""
-        return WindowSet(self.X[mask], self.y[mask], self.trial[mask], self.t_rel[mask])
+        return WindowSet(
+            self.X[mask],
+            self.y[mask],
+            self.trial[mask],
+            self.t_rel[mask],
+            self.group[mask],
+        )
 
 
 def majority_vote(
@@ -153,10 +176,8 @@ def accuracy_vs_time(
 
 
 def _fit(model: Any, X: np.ndarray, y: np.ndarray, groups: np.ndarray) -> Any:
-    """``model.fit``, passing the trial of each window when the model takes ``groups``."""
-    if "groups" in inspect.signature(model.fit).parameters:
-        return model.fit(X, y, groups=groups)
-    return model.fit(X, y)
+    """``model.fit``, passing each window's group (object or trial) when it takes ``groups``."""
+    return fit_with_groups(model, X, y, groups)
 
 
 def _cost(model: Any) -> dict[str, Any]:
@@ -350,6 +371,7 @@ class WindowClassification(Task):
                 f"stream {self.stream!r} has no channels {missing}; channels: {list(spec.channels)}"
             )
         by_onset = self._origin_is_onset(dataset)
+        by_group = self.split == "group" and self.group in dataset.trials.columns
         table = dataset.stream(self.stream)
         rows = table.groupby("trial_id", sort=False).indices  # trial -> row positions
         values = table[channels].to_numpy(dtype=np.float64)
@@ -382,12 +404,14 @@ class WindowClassification(Task):
             if span is not None:
                 keep &= (rel >= span[0] - 1e-9) & (rel <= span[1] + 1e-9)
             n = int(keep.sum())
+            unit = str(getattr(rec, self.group)) if by_group else tid
             parts.append(
                 WindowSet(
                     win.X[keep],
                     np.full(n, str(cls), dtype=object),
                     np.full(n, tid, dtype=object),
                     rel[keep],
+                    np.full(n, unit, dtype=object),
                 )
             )
         if not parts or sum(len(p) for p in parts) == 0:
@@ -401,6 +425,7 @@ class WindowClassification(Task):
             np.concatenate([p.y for p in parts]),
             np.concatenate([p.trial for p in parts]),
             np.concatenate([p.t_rel for p in parts]),
+            np.concatenate([p.group for p in parts]),
         )
 
     def _curve_span(self) -> list[float] | None:
@@ -468,18 +493,41 @@ class WindowClassification(Task):
         mode: str,
         *,
         curve: bool,
+        phase: str = "model",
+        chosen: bool = False,
     ) -> tuple[Any, pd.DataFrame]:
-        """Fit a clone per fold; every test window's prediction (pooled over folds)."""
+        """Fit a clone per fold; every test window's prediction (pooled over folds).
+
+        A model that selects among candidates (``selection_``) does so inside each
+        fold's training objects only; the fold's record is kept in
+        ``self.fold_selections_[phase]``. With ``chosen``, fold ``k`` fits what the
+        main model's fold ``k`` chose (its ``best_estimator_``, unfitted) instead of
+        selecting again: the controls and the width sweep then measure the chosen
+        pipeline on other inputs, at the cost of one fit per fold.
+        """
         span = self._span_union() if curve else self.window_end_s
         tables = []
         fitted = model
+        selections = self.fold_selections_.setdefault(phase, [])
+        t0 = time.perf_counter()
         for k, (train_ids, test_ids) in enumerate(folds):
             train = self.windows(
                 dataset.subset(train_ids), width, mode, span=self.window_end_s
             )
             test = self.windows(dataset.subset(test_ids), width, mode, span=span)
-            fitted = clone(model)
-            _fit(fitted, train.X, train.y, train.trial)
+            base = model
+            if chosen and k < len(self.fold_models_.get("model", [])):
+                base = getattr(self.fold_models_["model"][k], "best_estimator_", model)
+            fitted = clone(base)
+            _fit(fitted, train.X, train.y, train.group)
+            if phase == "model":
+                self.fold_models_.setdefault(phase, []).append(fitted)
+            if hasattr(fitted, "selection_"):
+                sel = fitted.selection_
+                selections.append(
+                    {"fold": k, "best": sel["best"], "best_score": sel["best_score"]}
+                )
+            self._progress(phase, k + 1, len(folds), t0)
             proba = (
                 fitted.predict_proba(test.X)
                 if hasattr(fitted, "predict_proba")
@@ -516,6 +564,20 @@ class WindowClassification(Task):
             )
         return fitted, pd.concat(tables, ignore_index=True)
 
+    def _progress(self, phase: str, done: int, total: int, t0: float) -> None:
+        """One stderr line per finished fold: phase i of n, fold, elapsed, ETA."""
+        elapsed = time.perf_counter() - t0
+        eta = elapsed / done * (total - done)
+        step, steps = self._phase_counter
+        print(
+            f"slipkit train: [{step}/{steps}] {phase}: fold {done}/{total} done, "
+            f"{elapsed:.0f} s elapsed, ETA {eta:.0f} s for this step",
+            file=sys.stderr,
+            flush=True,
+        )
+        if done == total:
+            self._phase_counter = (step + 1, steps)
+
     def _score(self, table: pd.DataFrame, classes: list[str]) -> dict[str, Any]:
         """Window and sequence metrics of the in-span rows of a predictions table."""
         rows = table[table["in_span"]]
@@ -536,25 +598,48 @@ class WindowClassification(Task):
         rate = self.rate_hz(dataset)
         width = self.frames(self.window, dataset)
         folds = self.splits(dataset, seed)
+        variants = []
+        if self.first_frame_control:
+            variants.append(("first_frame", "first_frame"))
+        if self.dynamics is not None:
+            variants.append(("dynamics", self.dynamics))
+        self.fold_selections_: dict[str, list[dict[str, Any]]] = {}
+        self.fold_models_: dict[str, list[Any]] = {}
+        self._phase_counter = (
+            1,
+            2
+            + len(variants)
+            + len(self.compare)
+            + len(self.sweep)
+            + int(len(folds) > 1),
+        )
         fitted, table = self._fit_score(
             model, dataset, folds, width, self.mode, curve=True
         )
         main = self._score(table, classes)
         curves: dict[str, pd.DataFrame] = {"model": table}
         controls: dict[str, Any] = {}
-        variants = []
-        if self.first_frame_control:
-            variants.append(("first_frame", "first_frame"))
-        if self.dynamics is not None:
-            variants.append(("dynamics", self.dynamics))
+        # Majority class of each fold's training side: what predicting without data scores.
+        _, t_maj = self._fit_score(
+            DummyClassifier(strategy="most_frequent"),
+            dataset,
+            folds,
+            width,
+            self.mode,
+            curve=False,
+            phase="majority",
+        )
         for name, mode in variants:
-            _, t_ctl = self._fit_score(model, dataset, folds, width, mode, curve=True)
+            _, t_ctl = self._fit_score(
+                model, dataset, folds, width, mode, curve=True, phase=name, chosen=True
+            )
             controls[name] = {"mode": mode, **self._score(t_ctl, classes)}
             curves[name] = t_ctl
+        controls["majority"] = {"mode": "most_frequent", **self._score(t_maj, classes)}
         others: dict[str, Any] = {}
         for name, other in self.compare.items():
             fitted_o, t_o = self._fit_score(
-                other, dataset, folds, width, self.mode, curve=False
+                other, dataset, folds, width, self.mode, curve=False, phase=name
             )
             others[name] = {
                 "estimator": type(other).__name__,
@@ -565,7 +650,14 @@ class WindowClassification(Task):
         for w in self.sweep:
             frames = self.frames(w, dataset)
             _, t_w = self._fit_score(
-                model, dataset, folds, frames, self.mode, curve=False
+                model,
+                dataset,
+                folds,
+                frames,
+                self.mode,
+                curve=False,
+                phase=f"window {w:g} {self.unit}",
+                chosen=True,
             )
             s = self._score(t_w, classes)
             by_width.append(
@@ -582,7 +674,9 @@ class WindowClassification(Task):
         if len(folds) > 1:
             # Every trial was tested once; the model to save is fitted on all of them.
             every = self.windows(dataset, width, self.mode, span=self.window_end_s)
-            fitted = _fit(clone(model), every.X, every.y, every.trial)
+            t0 = time.perf_counter()
+            fitted = _fit(clone(model), every.X, every.y, every.group)
+            self._progress("refit on every trial", 1, 1, t0)
         table.to_csv(out / "test_predictions.csv", index=False)
         vs_time = self._time_outputs(curves, dataset, out)
         if by_width:
@@ -597,12 +691,14 @@ class WindowClassification(Task):
             "accuracy": main["window"]["accuracy"],
             "balanced_accuracy": main["window"]["balanced_accuracy"],
             "sequence_accuracy": main["sequence"]["accuracy"],
+            "selection": self._selection(fitted),
             "first_frame_accuracy": controls.get("first_frame", {})
             .get("window", {})
             .get("accuracy"),
             "dynamics_accuracy": controls.get("dynamics", {})
             .get("window", {})
             .get("accuracy"),
+            "majority_accuracy": controls["majority"]["window"]["accuracy"],
             "label": self.label,
             "classes": classes,
             "chance": 1.0 / len(classes),
@@ -649,6 +745,19 @@ class WindowClassification(Task):
             "published": self.published or None,
         }
         return TaskResult(fitted, metrics, self._summary(metrics))
+
+    def _selection(self, fitted: Any) -> dict[str, Any] | None:
+        """The saved model's selection record, with the per-fold choices beside it.
+
+        ``best`` / ``best_score`` / ``candidates`` are the saved model's (chosen by
+        leave-one-object-out CV on every trial it was fitted on); ``per_fold`` holds
+        what each outer fold chose on its training objects only, which is what the
+        reported test scores come from.
+        """
+        record = getattr(fitted, "selection_", None)
+        if record is None:
+            return None
+        return {**record, "per_fold": self.fold_selections_.get("model", [])}
 
     def _time_outputs(
         self,
@@ -751,16 +860,38 @@ class WindowClassification(Task):
             f"label {m['label']} ({len(m['classes'])} classes), split by {m['split']['by']} "
             f"({m['split']['folds']} fold{'s' if m['split']['folds'] > 1 else ''})",
             f"  per window  {pct(m['accuracy'])}  (balanced {pct(m['balanced_accuracy'])}; chance {pct(m['chance'])}, majority {pct(m['majority_baseline_test'])})",
-            f"  per trial   {pct(m['sequence_accuracy'])}  (majority vote of its windows)",
+            f"  per trial   {pct(m['sequence_accuracy'])}  (balanced {pct(m['sequence']['balanced_accuracy'])}; majority vote of its windows)",
+            "  recall      "
+            + ", ".join(f"{c} {pct(r).strip()}" for c, r in m["test"]["recall"].items())
+            + " (per window)",
         ]
-        for name, c in m["controls"].items():
-            what = (
-                "first frame only"
-                if name == "first_frame"
-                else f"dynamics only ({c['mode']})"
-            )
+        sel = m.get("selection")
+        if sel:
+            best = dict(sel["best"])
+            name = best.pop("name", "?")
+            params = ", ".join(f"{k}={v}" for k, v in best.items())
             lines.append(
-                f"  {what:<24} window {pct(c['window']['accuracy'])}, trial {pct(c['sequence']['accuracy'])}"
+                f"  selected    {name}{f' ({params})' if params else ''}: {sel['scoring']} "
+                f"{sel['best_score']:.3f} by {sel['cv']} CV on the training objects "
+                f"({len(sel['candidates'])} candidates)"
+            )
+            if sel.get("per_fold"):
+                lines.append(
+                    "  per fold    "
+                    + "; ".join(
+                        f"{f['best'].get('name', '?')} {f['best_score']:.3f}"
+                        for f in sel["per_fold"]
+                    )
+                    + " (each chosen on its own training objects)"
+                )
+        for name, c in m["controls"].items():
+            what = {
+                "first_frame": "first frame only",
+                "majority": "majority class",
+            }.get(name, f"dynamics only ({c['mode']})")
+            lines.append(
+                f"  {what:<24} window {pct(c['window']['accuracy'])} (balanced "
+                f"{pct(c['window']['balanced_accuracy'])}), trial {pct(c['sequence']['accuracy'])}"
             )
         if m["published"]:
             lines.append(
