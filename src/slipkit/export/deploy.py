@@ -403,7 +403,12 @@ def _deploy_tactip(
     return Deployment(
         frame=_frame([stream], channels, 2, 1, rate),
         preprocessing=[{"op": "subtract", "value": np.round(ref, 6).tolist()}],
-        export_options={"with_features": True, "variant": task.variant},
+        # n_pins: the stream's pin count (a per-pin SVM trained on another refuses it)
+        export_options={
+            "with_features": True,
+            "variant": task.variant,
+            "n_pins": len(channels) // 2,
+        },
         positive=SLIP,
         debounce_k=int(task.debounce_k),
         trials=trial_frames(dataset, test_ids, stream, channels),

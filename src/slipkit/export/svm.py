@@ -37,6 +37,7 @@ from slipkit.export._graph import FLOAT, GraphBuilder
 from slipkit.export.pins import (
     PINS_INPUT,
     feature_spec,
+    n_features_of,
     pins_from_features,
     velocity_feature_nodes,
 )
@@ -122,6 +123,7 @@ def export_tactip_svm(
     variant: str = "dr_dtheta",
     shift_angles: bool = True,
     missing_count: bool = False,
+    n_pins: int | None = None,
     opset: int = DEFAULT_OPSET,
 ) -> ExportedGraph:
     """Export a fitted binary :class:`TacTipSVM` as plain ONNX ops.
@@ -138,6 +140,12 @@ def export_tactip_svm(
         The features the SVM was trained on (as
         :func:`slipkit.features.pins.velocity_features`); only read with
         ``with_features``. ``N`` follows from ``n_features_in_``.
+    n_pins : int, optional
+        Pins per frame of the stream the graph reads. Required for
+        ``features="pooled"`` (the input is then per-pin ``dr_dtheta`` features, or
+        raw pins with ``with_features``, and the pooled statistics are computed in
+        the graph: :func:`slipkit.export.tactip_detector.pooled_feature_nodes`); for
+        per-pin features it must match the pins the SVM was trained on.
     opset : int
         Default-domain opset (17 or 18).
 
@@ -155,6 +163,23 @@ def export_tactip_svm(
         )
     n_features = int(estimator.n_features_in_)
     g = GraphBuilder("tactip_svm", opset)
+    pooled = getattr(estimator, "features", "per_pin") == "pooled"
+    if pooled:
+        if n_pins is None or variant != "dr_dtheta" or missing_count:
+            raise ExportError(
+                "a pooled TacTipSVM needs n_pins (the stream's pin count), "
+                "variant='dr_dtheta' and no missing_count; got "
+                f"n_pins={n_pins}, variant={variant!r}, missing_count={missing_count}"
+            )
+        n_features = 2 * int(n_pins) + int(missing_count)
+    elif n_pins is not None and n_features != n_features_of(
+        int(n_pins), variant, missing_count
+    ):
+        raise ExportError(
+            f"the SVM was trained on {n_features} per-pin features "
+            f"({pins_from_features(n_features, variant, missing_count)} pins); the "
+            f"stream has {n_pins} pins: retrain, or use features='pooled'"
+        )
     if with_features:
         n_pins = pins_from_features(n_features, variant, missing_count)
         x = velocity_feature_nodes(
@@ -182,6 +207,11 @@ def export_tactip_svm(
             else "features " + ", ".join(map(str, names))
         )
         features = None
+    if pooled:
+        from slipkit.export.tactip_detector import pooled_feature_nodes, pooled_spec
+
+        x = pooled_feature_nodes(g, x, int(n_pins or 0))
+        features = {**(features or {}), **pooled_spec(int(n_pins or 0))}
     if estimator.kernel == "rbf":
         raw = _rbf_nodes(g, x, estimator)
     elif estimator.kernel == "linear":

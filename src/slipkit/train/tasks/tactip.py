@@ -19,6 +19,7 @@ import pandas as pd
 
 from slipkit.data.dataset import Dataset
 from slipkit.data.splits import split_by_trial
+from slipkit.errors import SlipkitError
 from slipkit.evaluate.metrics import classification_metrics, delay_summary
 from slipkit.features.pins import SLIP, STATIC, Variant
 from slipkit.features.tactip import DatasetFeatures, dataset_features
@@ -186,6 +187,7 @@ class TacTipFrames(Task):
         self, model: Any, dataset: Dataset, feats: DatasetFeatures
     ) -> tuple[dict[str, Any], pd.DataFrame]:
         """Frame metrics, per-trial online detection and a per-frame predictions table."""
+        _check_pin_count(model, feats, self.variant)
         pred = np.asarray(model.predict(feats.X))
         metrics = classification_metrics(feats.y, pred, LABELS)
         rate = self.rate_hz(dataset)
@@ -247,6 +249,24 @@ class TacTipFrames(Task):
             "test": metrics,
             "majority_baseline_test": float(np.mean(feats.y == STATIC)),
         }
+
+
+def _check_pin_count(model: Any, feats: DatasetFeatures, variant: str) -> None:
+    """Refuse per-pin features of another pin count (pooled models take any count)."""
+    if getattr(model, "pin_count_independent", False):
+        return
+    want = getattr(model, "n_features_in_", None)
+    have = int(feats.X.shape[1])
+    if want is None or int(want) == have:
+        return
+    per_pin = 1 if variant in ("dr", "dtheta") else 2
+    raise SlipkitError(
+        f"the model was trained on {int(want) // per_pin} pins ({int(want)} per-pin "
+        f"{variant} features); this dataset's pins stream has {have // per_pin} pins "
+        f"({have} features): the pin count and layout are part of a per-pin model; "
+        "retrain on this sensor, or train a pin-count-independent model "
+        "(model=tactip_svm_pooled or detector=tactip_alignment)"
+    )
 
 
 def _svm_params(model: Any) -> dict[str, Any]:
