@@ -138,7 +138,7 @@ def test_tactip_manifest_carries_slip_class_debounce_budget_and_features(
     assert [2, 254] == [raw["frame"]["window"], raw["frame"]["shape"][0]]
     assert "slip" == raw["decision"]["positive"]
     assert 2 == raw["debounce"]["k"]
-    assert pytest.approx(0.8333) == raw["budget_ms"]["p99"]
+    assert pytest.approx(1000.0 / 120.0 / 10) == raw["budget_ms"]["p99"]  # 120 Hz data
     assert "subtract" == raw["preprocessing"][0]["op"]
     assert raw["training"]["parity"]["passed"] is True
     info = json.loads((runs["tactip_svm"] / "run.json").read_text())
@@ -156,7 +156,7 @@ def test_force_bundle_takes_its_baseline_from_the_stream(
     assert 2 == raw["decision"]["column"]
     assert "classes" not in raw["decision"]
     assert 1.5 == raw["threshold"]
-    assert pytest.approx(0.3333) == raw["budget_ms"]["p99"]
+    assert pytest.approx(1000.0 / 300.0 / 10) == raw["budget_ms"]["p99"]  # 300 Hz data
 
 
 def test_choose_session_writes_measured_options(

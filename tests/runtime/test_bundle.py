@@ -132,7 +132,7 @@ def _set(path: str, value: Any) -> Any:
     ("path", "value", "field"),
     [
         ("format", "onnx-zip", "format"),
-        ("schema_version", 3, "schema_version"),
+        ("schema_version", 4, "schema_version"),
         ("schema_version", 1, "schema_version"),
         ("schema_version", "1", "schema_version"),
         ("frame.window", 0, "frame.window"),

@@ -9,8 +9,14 @@ parity (:func:`slipkit.export.parity.check_parity`: decisions agree on >= 99.9 %
 calls, every disagreement within ``score_eps`` of the threshold, max |score
 difference| <= ``atol`` for networks and regressors) -- a failed check raises
 :class:`~slipkit.errors.SlipkitError` and writes nothing; build the manifest in the
-runtime's schema (:mod:`slipkit.runtime.bundle`); measure the session options on
-the replay frames (:func:`slipkit.runtime.choose_session`); write the bundle
+runtime's schema (:mod:`slipkit.runtime.bundle`): the class names and the slip
+classes, the latency budget from the data's own frame rate (``frame.rate_hz``; the
+sensor family's ``configs/deploy`` period only when the data has no rate, and
+``budget_ms.source`` says which), and what the model was scored on and whether it
+was refit on all data; pick the replay trials (every class and group of the test
+side, bounded in frames: :meth:`~slipkit.export.deploy.Deployment.replay_trials`);
+measure the session options on the replay frames
+(:func:`slipkit.runtime.choose_session`); write the bundle
 atomically with :func:`slipkit.runtime.write_bundle` (which reloads it before the
 final rename); print a summary and the bundle folder last.
 """
@@ -74,9 +80,16 @@ def _finite(obj: Any) -> Any:
 
 
 def _decision(
-    graph: Any, positive: str | None, regression: Mapping[str, Any] | None
+    graph: Any,
+    positive: str | None,
+    regression: Mapping[str, Any] | None,
+    slip_classes: list[str] | None = None,
 ) -> tuple[dict[str, Any], float | None]:
-    """The manifest ``decision`` object and top-level ``threshold``."""
+    """The manifest ``decision`` object and top-level ``threshold``.
+
+    The argmax rule gets ``slip_classes`` (default ``[positive]``); the threshold
+    rule (two classes) names one slip class, ``positive``.
+    """
     d = graph.decision()
     if d is None:
         if regression is None:
@@ -100,7 +113,40 @@ def _decision(
             f"positive {positive!r} is not one of the model's classes {classes}"
         )
     d["positive"] = positive
+    if d["rule"] == "argmax":
+        slip = list(slip_classes or [positive])
+        unknown = [c for c in slip if c not in classes]
+        if unknown:
+            raise SlipkitError(
+                f"slip_classes {unknown} are not classes of the model {classes}"
+            )
+        if positive not in slip:
+            d["positive"] = slip[0]
+        d["slip_classes"] = slip
     return d, None if threshold is None else float(threshold)
+
+
+def _budget(cfg: DictConfig, dataset: Any, frame: Mapping[str, Any]) -> dict[str, Any]:
+    """``budget_ms``: the frame period from the data's rate, else the sensor's default.
+
+    The period is ``1000 / frame.rate_hz`` when every stream of the frame has its
+    own ``rate_hz`` in the dataset (``source: data_rate_hz``); otherwise the sensor
+    family's ``configs/deploy`` value (``source: sensor_default``). ``p99`` is the
+    deploy config's ``p99_fraction`` of the period.
+    """
+    nominal = deploy_config(cfg, str(dataset.sensor))
+    fraction = nominal["p99"] / nominal["frame_period"]
+    streams = list(frame.get("streams") or [])
+    if streams and all(
+        s in dataset.streams and dataset.streams[s].rate_hz is not None for s in streams
+    ):
+        period = 1000.0 / float(frame["rate_hz"])
+        return {
+            "frame_period": period,
+            "p99": period * fraction,
+            "source": "data_rate_hz",
+        }
+    return {**nominal, "source": "sensor_default"}
 
 
 def _parity_error(report: Mapping[str, Any], name: str) -> SlipkitError:
@@ -175,8 +221,13 @@ def export_main(cfg: DictConfig) -> Path:
             f"{dataset.fingerprint()[:12]}... but the run recorded {want[:12]}...; the "
             "held-out trials cannot be recovered (was the dataset folder changed?)"
         )
+    # The sensor's nominal rate stands in for a stream without its own rate_hz.
+    nominal = deploy_config(cfg, str(dataset.sensor))
     options = {
         "positive": cfg.get("positive"),
+        "slip_classes": _names(cfg, "slip_classes"),
+        "no_slip_classes": _names(cfg, "no_slip_classes"),
+        "fallback_rate_hz": 1000.0 / nominal["frame_period"],
         "debounce_k": cfg.get("debounce_k"),
         "regression": OmegaConf.to_container(cfg.regression, resolve=True)
         if cfg.get("regression") is not None
@@ -207,14 +258,27 @@ def export_main(cfg: DictConfig) -> Path:
         )
     if not report["passed"]:
         raise _parity_error(report, name)
-    decision, threshold = _decision(graph, dep.positive, dep.regression)
-    budget = deploy_config(cfg, str(dataset.sensor))
-    stream_period = 1000.0 / float(dep.frame["rate_hz"])
-    if stream_period < budget["frame_period"] - 1e-9:
-        # A stream faster than the sensor's nominal frame (e.g. BioTac pac at 2.2 kHz
-        # beside 300 Hz electrodes): the loop must keep up with this stream's samples.
-        fraction = budget["p99"] / budget["frame_period"]
-        budget = {"frame_period": stream_period, "p99": stream_period * fraction}
+    decision, threshold = _decision(
+        graph, dep.positive, dep.regression, dep.slip_classes
+    )
+    budget = _budget(cfg, dataset, dep.frame)
+    replay_max = (
+        None if cfg.get("replay_max_frames") is None else int(cfg.replay_max_frames)
+    )
+    replay_trials = dep.replay_trials(replay_max)
+    frames, times = dep.replay(replay_max)
+    replay_by_class: dict[str, int] = {}
+    for tr in replay_trials:
+        if tr.label is not None:
+            replay_by_class[tr.label] = replay_by_class.get(tr.label, 0) + 1
+    scored_on = dep.scored_on or "the run's held-out test split"
+    replay_note = (
+        "held-out trials: the replay checks parity, decisions and latency on data the "
+        "model never saw"
+        if dep.held_out
+        else "the saved model was refit on all data, these trials included: the "
+        "replay checks parity and latency, not accuracy (accuracy: scored_on)"
+    )
     import onnxruntime
 
     metrics = run.info.get("objective", {})
@@ -255,6 +319,15 @@ def export_main(cfg: DictConfig) -> Path:
                 "metrics": {"test": m.get("test")},
                 "held_out_trials": [t.trial_id for t in dep.trials],
                 "held_out": dep.held_out,
+                "refit_on_all_data": bool(dep.refit_on_all_data),
+                "scored_on": scored_on,
+                "replay": {
+                    "trials": len(replay_trials),
+                    "frames": len(frames),
+                    "held_out": dep.held_out,
+                    **({"by_class": replay_by_class} if replay_by_class else {}),
+                    "note": replay_note,
+                },
                 "score": graph.score_meaning,
                 "parity": report,
             }
@@ -262,9 +335,6 @@ def export_main(cfg: DictConfig) -> Path:
     }
     if threshold is None:
         manifest.pop("threshold")
-    frames, times = dep.replay(
-        None if cfg.get("replay_max_frames") is None else int(cfg.replay_max_frames)
-    )
     model_bytes = graph.serialize()
     session_note = "defaults"
     if bool(cfg.get("choose_session", True)):
@@ -298,17 +368,56 @@ def export_main(cfg: DictConfig) -> Path:
         f"{graph.opset}, input {graph.input_name} {[1, *input_shape]}, "
         f"{len(dep.preprocessing)} preprocessing step(s)"
     )
+    side = "held-out" if dep.held_out else "test-side (refit on all data: not held out)"
     print(
-        f"  parity on {report['n_frames']} held-out calls: agreement "
+        f"  parity on {report['n_frames']} {side} calls: agreement "
         f"{report['agreement'] * 100:.2f} %, max |score diff| {report['max_abs_diff']:.3g}"
     )
+    if decision.get("rule") == "argmax":
+        print(
+            f"  classes {decision['classes']}; slip classes {decision['slip_classes']}"
+        )
     print(
-        f"  budget p99 <= {budget['p99']:.4g} ms (frame period {budget['frame_period']:.4g} ms); "
-        f"session {session_note}"
+        f"  scored on: {scored_on}; refit on all data: "
+        f"{'yes' if dep.refit_on_all_data else 'no'}"
     )
-    print(f"  replay: {len(frames)} frames of {len(dep.trials)} held-out trial(s)")
+    source = {
+        "data_rate_hz": f"the data's {float(dep.frame['rate_hz']):g} Hz",
+        "sensor_default": f"the {dataset.sensor} default (the data has no rate)",
+    }[budget["source"]]
+    print(
+        f"  budget p99 <= {budget['p99']:.4g} ms (frame period {budget['frame_period']:.4g} ms, "
+        f"from {source}); session {session_note}"
+    )
+    classes_note = (
+        " (" + ", ".join(f"{c} {n}" for c, n in replay_by_class.items()) + ")"
+        if replay_by_class
+        else ""
+    )
+    print(
+        f"  replay: {len(frames)} frames of {len(replay_trials)} of the "
+        f"{len(dep.trials)} test-side trial(s){classes_note}; "
+        + ("held out" if dep.held_out else "held_out: false (parity and latency only)")
+    )
     print(out)
     return out
+
+
+def _names(cfg: DictConfig, key: str) -> list[str] | None:
+    """A list-of-names option (``slip_classes=[n,e,s]``) as strings; None when unset."""
+    value = cfg.get(key)
+    if value is None:
+        return None
+    value = (
+        OmegaConf.to_container(value, resolve=True)
+        if OmegaConf.is_config(value)
+        else value
+    )
+    if not isinstance(value, list) or not value:
+        raise SlipkitError(
+            f"{key} must be a non-empty list of class names, e.g. {key}=[n,e,s]; got {value!r}"
+        )
+    return [str(v) for v in value]
 
 
 __all__ = ["deploy_config", "export_main"]

@@ -10,9 +10,13 @@ estimator saw in training:
 * the **preprocessing** the graph does not hold, as steps of the runtime's closed op
   registry (:data:`slipkit.runtime.preprocessing.OPS`);
 * the **exporter options** (e.g. the TacTip pin-velocity features inside the graph);
-* which class is **slip** (``positive``) and the **debounce** ``k``;
+* which classes are **slip** (``positive``; a multi-class model: ``slip_classes``)
+  and the **debounce** ``k``;
 * the **held-out trials** of the run (its test split, rebuilt from the run's config
-  with :func:`slipkit.train.data.training_dataset`), as raw frames + timestamps.
+  with :func:`slipkit.train.data.training_dataset`), as raw frames + timestamps, with
+  each trial's class and group so that the replay samples every class;
+* what the saved model was **scored on** and whether it was **refit on all data**
+  (then no trial is held out from it: the replay checks parity and latency only).
 
 A deployer is registered per task class (:func:`register_deployer`; a subclass uses
 its parent's, as :func:`slipkit.export.registry.exporter_for`). The model inputs for
@@ -41,9 +45,14 @@ Per task
 ``WindowClassification``
     Frame = one frame of ``task.stream`` (``task.channels``), window ``W`` and hop
     from the task (in frames). Mode ``raw``: no step; ``window``:
-    ``subtract_first``; ``trial``: ``baseline_first`` with ``frames = 1``. Slip class:
-    ``slip`` when it is a class, else the export config's ``positive`` (default the
-    last class in ``classes_`` order).
+    ``subtract_first``; ``trial``: ``baseline_first`` with ``frames = 1``. Classes:
+    the fitted model's ``classes_`` (any classifier the task fits). Slip classes: the
+    export config's ``slip_classes`` (or ``positive``, one class), else ``slip`` when
+    it is a class, else every class but the no-slip ones (``no_slip_classes``, e.g.
+    DoS's ``t``, touch): a direction or slip-type model runs as a classifier whose
+    decided class the runtime counts, and any slip class is a slip decision. With
+    ``task.folds`` the run scored the model on its outer folds and then refit it on
+    every trial: ``refit_on_all_data`` is true and no trial is held out from it.
 ``StreamDetection``
     Frame = one raw sample of ``task.stream`` (``task.channels``); window and hop are
     what the detector's graph needs (:class:`slipkit.export.detectors.DetectorGraph`,
@@ -88,12 +97,18 @@ class HeldOutTrial:
     keep : ndarray of bool, shape (n,), or None
         Frames that are held out (a decision whose last frame is kept is used for
         parity); None: all of them.
+    label : str or None
+        The trial's class (the replay is stratified by it); None: unknown.
+    group : str or None
+        The trial's group, e.g. its object (the replay is stratified by it too).
     """
 
     trial_id: str
     frames: NDArray[np.float64]
     timestamps: NDArray[np.float64]
     keep: NDArray[np.bool_] | None = None
+    label: str | None = None
+    group: str | None = None
 
 
 @dataclass
@@ -109,7 +124,8 @@ class Deployment:
     export_options : dict
         Keyword options for :func:`slipkit.export.registry.export`.
     positive : str or None
-        The slip class (None: a regressor, see ``regression``).
+        The slip class (None: a regressor, see ``regression``); with
+        ``slip_classes``, one of them (the one a binary threshold rule would use).
     debounce_k : int
         Consecutive slip decisions before slip is declared.
     trials : list of HeldOutTrial
@@ -129,6 +145,13 @@ class Deployment:
         (:class:`slipkit.export.detectors.DetectorGraph`) fixes ``window`` and
         ``hop``, and parity is :func:`slipkit.export.detectors.check_detector_parity`
         on the held-out recordings.
+    slip_classes : list of str or None
+        A multi-class model's slip classes (the argmax rule declares slip when the
+        decided class is any of them); None: ``[positive]``.
+    refit_on_all_data : bool
+        The saved model was refit on every trial after scoring (k-fold runs).
+    scored_on : str or None
+        What the run's metrics were computed on (None: the run's held-out test split).
     """
 
     frame: dict[str, Any]
@@ -142,32 +165,94 @@ class Deployment:
     regression: dict[str, Any] | None = None
     detector: bool = False
     model: Any = None
+    slip_classes: list[str] | None = None
+    refit_on_all_data: bool = False
+    scored_on: str | None = None
 
     @property
     def frame_shape(self) -> tuple[int, ...]:
         """Shape of one frame."""
         return tuple(int(s) for s in self.frame["shape"])
 
+    def replay_trials(self, max_frames: int | None = None) -> list[HeldOutTrial]:
+        """Whole held-out trials for ``replay.npz``: every class and group, within ``max_frames``.
+
+        Trials are taken round-robin over the strata (class, group), in the order
+        each stratum first appears, the k-th trial of every stratum before any
+        (k+1)-th, so a bounded replay holds trials of every class and object from
+        the whole test side (not the first trials, which a class-ordered dataset
+        would fill with its first classes). Within a stratum the k-th pick is
+        spread over its trials (first, middle, quarters, ...: :func:`_spread`). A trial that would exceed
+        ``max_frames`` is passed over for a shorter one; the chosen trials keep
+        their original order. When no whole trial fits, the first trial is cut to
+        ``max_frames``.
+        """
+        if max_frames is None:
+            return list(self.trials)
+        strata: dict[tuple[str | None, str | None], list[int]] = {}
+        for i, tr in enumerate(self.trials):
+            strata.setdefault((tr.label, tr.group), []).append(i)
+        strata = {k: [v[j] for j in _spread(len(v))] for k, v in strata.items()}
+        order = [
+            idx[k]
+            for k in range(max((len(v) for v in strata.values()), default=0))
+            for idx in strata.values()
+            if k < len(idx)
+        ]
+        chosen, total = [], 0
+        for i in order:
+            n = len(self.trials[i].frames)
+            if total + n <= max_frames:
+                chosen.append(i)
+                total += n
+        if not chosen and self.trials:
+            tr = self.trials[0]
+            return [
+                HeldOutTrial(
+                    tr.trial_id,
+                    tr.frames[:max_frames],
+                    tr.timestamps[:max_frames],
+                    None if tr.keep is None else tr.keep[:max_frames],
+                    tr.label,
+                    tr.group,
+                )
+            ]
+        return [self.trials[i] for i in sorted(chosen)]
+
     def replay(
         self, max_frames: int | None = None
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """The held-out trials end to end: frames and non-decreasing timestamps (s).
+        """The replay trials (:meth:`replay_trials`) end to end: frames and timestamps (s).
 
         Each trial's clock is shifted to start one frame period after the previous
-        trial's last frame. ``max_frames`` keeps the first frames only.
+        trial's last frame.
         """
         period = 1.0 / float(self.frame["rate_hz"])
         frames, times, start = [], [], 0.0
-        for tr in self.trials:
+        for tr in self.replay_trials(max_frames):
             t = tr.timestamps - tr.timestamps[0] + start
             frames.append(tr.frames)
             times.append(t)
             start = float(t[-1]) + period if len(t) else start
         f = np.concatenate(frames) if frames else np.zeros((0, *self.frame_shape))
         ts = np.concatenate(times) if times else np.zeros(0)
-        if max_frames is not None:
-            f, ts = f[:max_frames], ts[:max_frames]
         return f, ts
+
+
+def _spread(n: int) -> list[int]:
+    """``range(n)`` reordered so that every prefix is spread over it (0, n/2, n/4, 3n/4, ...).
+
+    The van der Corput order: positions sorted by the bit-reversed binary fraction
+    of their index on the next power of two.
+    """
+    if n <= 1:
+        return list(range(n))
+    bits = (n - 1).bit_length()
+
+    def reversed_bits(i: int) -> int:
+        return int(f"{i:0{bits}b}"[::-1], 2)
+
+    return [i for i in sorted(range(1 << bits), key=reversed_bits) if i < n]
 
 
 Deployer = Callable[[Task, Run, Dataset, Mapping[str, Any]], Deployment]
@@ -285,7 +370,11 @@ def held_out_inputs(
         if parts
         else np.zeros((0, *(int(s) for s in input_shape)))
     )
-    return out if max_calls is None else out[:max_calls]
+    if max_calls is None or len(out) <= max_calls:
+        return out
+    # Evenly spaced over every held-out call (not the first ones: a dataset in class
+    # order would leave the last classes unchecked).
+    return out[np.linspace(0, len(out) - 1, max_calls).round().astype(np.intp)]
 
 
 def slip_decisions(
@@ -293,14 +382,17 @@ def slip_decisions(
 ) -> NDArray[np.bool_]:
     """Per-call slip decisions of the manifest rule (as :class:`slipkit.runtime.StreamLoop`).
 
-    ``scores`` has one row per call (the flattened score output).
+    ``scores`` has one row per call (the flattened score output); ``argmax``: slip
+    when the largest entry is one of ``decision.slip_classes`` (else ``positive``).
     """
     s = np.asarray(scores, dtype=np.float64).reshape(len(scores), -1)
     classes = decision.get("classes")
     positive = decision.get("positive")
     if decision["rule"] == "argmax":
         assert classes is not None
-        return np.asarray(np.argmax(s, axis=1) == list(classes).index(positive))
+        slip = decision.get("slip_classes") or [positive]
+        cols = [list(classes).index(c) for c in slip]
+        return np.isin(np.argmax(s, axis=1), cols)
     col = s[:, int(decision.get("column", 0))]
     thr = float(threshold if threshold is not None else 0.0)
     above = col > thr if decision.get("strict", False) else col >= thr
@@ -320,15 +412,102 @@ def run_metrics(run: Run) -> dict[str, Any]:
     return loaded
 
 
-def _rate(dataset: Dataset, stream: str) -> float:
+def _rate(
+    dataset: Dataset, stream: str, options: Mapping[str, Any] | None = None
+) -> float:
+    """The stream's own ``rate_hz``; without one, ``options["fallback_rate_hz"]``.
+
+    ``slipkit export`` passes the sensor family's nominal rate (``configs/deploy``)
+    as the fallback and records in the manifest which of the two the frame uses.
+    """
     if stream not in dataset.streams:
         raise SlipkitError(
             f"dataset {dataset.name!r} has no stream {stream!r}; streams: {sorted(dataset.streams)}"
         )
     rate = dataset.streams[stream].rate_hz
     if rate is None:
-        raise SlipkitError(f"stream {stream!r} has no frame rate: cannot deploy it")
+        fallback = (options or {}).get("fallback_rate_hz")
+        if fallback is None:
+            raise SlipkitError(f"stream {stream!r} has no frame rate: cannot deploy it")
+        log.warning(
+            "stream %r has no rate_hz: the frame uses the sensor default %g Hz",
+            stream,
+            float(fallback),
+        )
+        return float(fallback)
     return float(rate)
+
+
+def trial_classes(
+    dataset: Dataset,
+    trials: Sequence[HeldOutTrial],
+    label: str | None,
+    group: str | None,
+) -> list[HeldOutTrial]:
+    """``trials`` with each one's class (column ``label``) and group (``group``) filled in."""
+    table = dataset.trials.set_index(dataset.trials["trial_id"].astype(str))
+
+    def value(tid: str, col: str | None) -> str | None:
+        if col is None or col not in table.columns:
+            return None
+        v = table.at[tid, col]
+        return None if v is None or (isinstance(v, float) and np.isnan(v)) else str(v)
+
+    return [
+        HeldOutTrial(
+            t.trial_id,
+            t.frames,
+            t.timestamps,
+            t.keep,
+            value(t.trial_id, label),
+            value(t.trial_id, group),
+        )
+        for t in trials
+    ]
+
+
+#: Class names that mean "no slip" (the default slip classes are the others).
+NO_SLIP_CLASSES = ("t", "touch", "static", "no_slip", "noslip", "stable", "none")
+
+
+def choose_slip_classes(
+    classes: Sequence[str], options: Mapping[str, Any]
+) -> list[str]:
+    """The slip classes of a classifier with ``classes`` (the export options first).
+
+    ``options["slip_classes"]`` (a list) or ``options["positive"]`` (one class) when
+    given; else ``["slip"]`` when it is a class; else every class not in
+    ``options["no_slip_classes"]`` (default :data:`NO_SLIP_CLASSES`), e.g. every
+    direction of slip against DoS's ``t`` (touch), or both of linear / rotational.
+    """
+    classes = [str(c) for c in classes]
+    given = options.get("slip_classes")
+    if given is None and options.get("positive") is not None:
+        given = [options["positive"]]
+    if given is not None:
+        if isinstance(given, str) or not isinstance(given, Sequence):
+            raise SlipkitError(
+                f"slip_classes must be a list of class names; got {given!r}"
+            )
+        chosen = [str(c) for c in given]
+        unknown = [c for c in chosen if c not in classes]
+        if unknown or not chosen or len(set(chosen)) != len(chosen):
+            raise SlipkitError(
+                f"slip_classes {chosen} must be distinct classes of the model "
+                f"{classes}" + (f"; not classes: {unknown}" if unknown else "")
+            )
+        return chosen
+    if "slip" in classes:
+        return ["slip"]
+    no_slip = options.get("no_slip_classes")
+    no_slip = NO_SLIP_CLASSES if no_slip is None else [str(c) for c in no_slip]
+    chosen = [c for c in classes if c not in set(no_slip)]
+    if not chosen:
+        raise SlipkitError(
+            f"every class of the model {classes} is a no-slip class "
+            f"({list(no_slip)}); give slip_classes=[...]"
+        )
+    return chosen
 
 
 def trial_frames(
@@ -383,7 +562,7 @@ def _deploy_tactip(
 
     assert isinstance(task, TacTipFrames)
     stream = task.stream
-    rate = _rate(dataset, stream)
+    rate = _rate(dataset, stream, options)
     channels = list(dataset.streams[stream].channels)
     split = run_metrics(run).get("split", {})
     seed = int(run.config.get("seed", 0))
@@ -436,7 +615,7 @@ def _deploy_force(
             "in one frame) is not deployable yet; train with pdc_stream=null"
         )
     stream = task.stream
-    rate = _rate(dataset, stream)
+    rate = _rate(dataset, stream, options)
     channels = list(dataset.streams[stream].channels)
     seed = int(run.config.get("seed", 0))
     frames = task.frames(dataset)
@@ -501,7 +680,7 @@ def _deploy_windows(
 
     assert isinstance(task, WindowClassification)
     stream = task.stream
-    rate = _rate(dataset, stream)
+    rate = _rate(dataset, stream, options)
     spec = dataset.streams[stream]
     channels = list(spec.channels) if task.channels is None else list(task.channels)
     width = task.frames(task.window, dataset)
@@ -513,6 +692,12 @@ def _deploy_windows(
     ]
     test_ids = [str(t) for fold in folds for t in fold]
     held_out = len(folds) <= 1
+    by = f"leave-{task.group}s-out" if task.split == "group" else "stratified by class"
+    scored_on = (
+        f"held-out test split of {len(test_ids)} trials ({task.split} split)"
+        if held_out
+        else f"{len(folds)}-fold {by} CV (outer folds), before the refit"
+    )
     steps: list[dict[str, Any]]
     if task.mode == "raw":
         steps = []
@@ -525,26 +710,39 @@ def _deploy_windows(
             f"task.mode {task.mode!r} is a control (each window replaced by the trial's "
             "first frame), not a deployable model"
         )
+    # Any classifier the task fits (a network, a scikit-learn pipeline) has classes_.
     model_classes = [str(c) for c in getattr(run.model, "classes_", [])]
-    positive = options.get("positive")
-    if positive is None:
-        positive = "slip" if "slip" in model_classes else model_classes[-1]
-    if str(positive) not in model_classes:
+    if not model_classes:
         raise SlipkitError(
-            f"positive {positive!r} is not a class of the model {model_classes}"
+            f"run {run.path}: the saved {type(run.model).__name__} has no classes_ "
+            "(not a fitted classifier)"
         )
+    slip = choose_slip_classes(model_classes, options)
+    # The one class a binary threshold rule names: the configured one, else the
+    # last slip class in classes_ order (the former default, the last class).
+    positive = str(options.get("positive") or slip[-1])
+    trials = trial_classes(
+        dataset,
+        trial_frames(dataset, test_ids, stream, channels),
+        task.label,
+        task.group if task.group in dataset.trials.columns else None,
+    )
     return Deployment(
         frame=_frame([stream], channels, width, hop, rate),
         preprocessing=steps,
         export_options={},
-        positive=str(positive),
+        positive=positive,
         debounce_k=int(options.get("debounce_k") or 1),
-        trials=trial_frames(dataset, test_ids, stream, channels),
+        trials=trials,
         held_out=held_out,
+        slip_classes=slip,
+        refit_on_all_data=not held_out,
+        scored_on=scored_on,
         notes=[
             f"windows of {width} frames of {stream!r} ({len(channels)} channels), "
             f"flattened frame-major, mode {task.mode}, every {hop} frames",
-            f"slip class: {positive!r} of {model_classes}",
+            f"classes {model_classes} ({task.label}); slip when the decided class is "
+            f"one of {slip}",
         ],
     )
 
@@ -560,7 +758,7 @@ def _deploy_detection(
 
     assert isinstance(task, StreamDetection)
     stream = task.stream
-    rate = _rate(dataset, stream)
+    rate = _rate(dataset, stream, options)
     channels = (
         list(dataset.streams[stream].channels)
         if task.channels is None
@@ -627,8 +825,10 @@ def _register_builtin() -> None:
 _register_builtin()
 
 __all__ = [
+    "NO_SLIP_CLASSES",
     "Deployment",
     "HeldOutTrial",
+    "choose_slip_classes",
     "decision_ends",
     "deployer_for",
     "deployment",
@@ -636,6 +836,7 @@ __all__ = [
     "held_out_inputs",
     "register_deployer",
     "slip_decisions",
+    "trial_classes",
 ]
 
 
@@ -668,7 +869,7 @@ def _deploy_sliptack_speed(
             f"(has {sorted(models)})"
         )
     stream = task.stream
-    rate = _rate(dataset, stream)
+    rate = _rate(dataset, stream, options)
     if abs(rate - float(est.rate_hz)) > 1e-9 * rate:
         raise SlipkitError(
             f"stream {stream!r} runs at {rate:g} Hz but the estimator's rate_hz is "

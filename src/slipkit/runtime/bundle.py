@@ -8,10 +8,10 @@ latency budget and the session options. Loading never executes code from the bun
 types and bounds, and the sha256 of every listed file before an onnxruntime session
 is created; the graph's first call then runs under a deadline.
 
-Manifest schema, version 2 (every field is described in ``docs/deploy.md``)::
+Manifest schema, version 3 (every field is described in ``docs/deploy.md``)::
 
     {
-      "format": "slipkit-bundle", "schema_version": 2, "name": "tactip_svm",
+      "format": "slipkit-bundle", "schema_version": 3, "name": "tactip_svm",
       "description": "optional free text",
       "frame": {"streams": ["pins"], "channels": ["x0", ..., "y126"], "shape": [254],
                 "window": 2, "hop": 1, "rate_hz": 120.0},
@@ -25,13 +25,17 @@ Manifest schema, version 2 (every field is described in ``docs/deploy.md``)::
                    "strict": false},
       "threshold": 0.0,
       "debounce": {"k": 2},
-      "budget_ms": {"frame_period": 8.333, "p99": 0.833},
+      "budget_ms": {"frame_period": 8.333, "p99": 0.833,
+                    "source": "data_rate_hz"},
       "session": {"intra_op_num_threads": 1, "inter_op_num_threads": 1,
                   "graph_optimization_level": "all", "allow_spinning": false,
                   "warmup": 20},
       "opset": 17,
       "producer": {"slipkit": "0.1.0", "onnx": "1.23.2", "skl2onnx": "1.19.1"},
-      "training": {"data_fingerprint": "…", "metrics": {"test": {"f1": 0.97}}},
+      "training": {"data_fingerprint": "…", "metrics": {"test": {"f1": 0.97}},
+                   "refit_on_all_data": false, "scored_on": "…", "held_out": true,
+                   "replay": {"trials": 12, "frames": 3000, "held_out": true,
+                              "by_class": {"slip": 6, "static": 6}, "note": "…"}},
       "files": {"model.onnx": "<sha256 hex>", "replay.npz": "<sha256 hex>"},
       "manifest_sha256": "<sha256 hex of the canonical manifest>"
     }
@@ -43,6 +47,15 @@ entries that may be ``null`` (a symbolic dimension); :func:`write_bundle` record
 dtype and shape of every listed output from the graph. The digest catches an edited
 or damaged manifest (a loosened budget, a changed threshold); it is a checksum, not a
 signature: whoever can write the folder can recompute it.
+
+Version 3 added, for a multi-class model, ``decision.slip_classes`` (the argmax rule:
+slip when the largest score entry is any of these classes, e.g. every direction of
+slip against ``t``, touch; one class is still ``positive``), ``budget_ms.source``
+(``data_rate_hz``: the frame period is ``1000 / frame.rate_hz``; ``sensor_default``:
+the sensor family's ``configs/deploy`` value, used when the data has no rate) and
+checked provenance in ``training`` (``refit_on_all_data``, ``scored_on``,
+``held_out``, ``replay``). This runtime reads versions 2 and 3
+(:data:`READ_VERSIONS`); the digest covers every field of both.
 """
 
 from __future__ import annotations
@@ -78,7 +91,13 @@ from slipkit.runtime.preprocessing import Pipeline
 from slipkit.runtime.session import ORT_ERRORS, SessionSpec, make_session
 
 FORMAT = "slipkit-bundle"
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
+#: Schema versions this runtime reads (2: one slip class; 3 adds the fields above).
+READ_VERSIONS = (2, 3)
+#: Where ``budget_ms.frame_period`` came from (schema 3).
+BUDGET_SOURCES = ("data_rate_hz", "sensor_default")
+#: Longest free-text provenance field checked in ``training`` (characters).
+MAX_TEXT = 4096
 MODEL_FILE = "model.onnx"
 MANIFEST_FILE = "manifest.json"
 #: The manifest field holding :func:`manifest_digest` of the rest of the manifest.
@@ -239,6 +258,9 @@ class DecisionSpec:
     strict : bool
         Compare with ``>`` instead of ``>=`` (scikit-learn's ``predict`` uses
         ``decision_function > 0``).
+    slip_columns : tuple of int
+        ``argmax``: the score entries of every slip class (``decision.slip_classes``,
+        schema 3; else the positive class's alone). Empty for the threshold rule.
     """
 
     output: str
@@ -248,6 +270,17 @@ class DecisionSpec:
     positive: str | None
     threshold: float | None
     strict: bool = False
+    slip_columns: tuple[int, ...] = ()
+
+    @property
+    def slip_classes(self) -> tuple[str, ...]:
+        """The classes a decision counts as slip (``()`` without classes: above is slip)."""
+        if self.classes is None:
+            return ()
+        if self.rule == "argmax":
+            return tuple(self.classes[c] for c in self.slip_columns)
+        assert self.positive is not None
+        return (self.positive,)
 
     @property
     def slip_above(self) -> bool:
@@ -257,10 +290,15 @@ class DecisionSpec:
 
 @dataclass(frozen=True)
 class Budget:
-    """Latency budget per decision, ms: the sensor's frame period and the p99 target."""
+    """Latency budget per decision, ms: the sensor's frame period and the p99 target.
+
+    ``source`` says where the frame period came from (:data:`BUDGET_SOURCES`; None
+    in a schema-2 manifest, which does not say).
+    """
 
     frame_period_ms: float
     p99_ms: float
+    source: str | None = None
 
 
 @dataclass(frozen=True)
@@ -399,9 +437,46 @@ def _frame(f: Fields) -> FrameSpec:
     return spec
 
 
-def _decision(top: Fields, outputs: tuple[TensorSpec, ...]) -> DecisionSpec:
+def _slip_columns(
+    f: Fields, classes: tuple[str, ...] | None, positive: str | None
+) -> tuple[int, ...]:
+    """The argmax rule's slip-class indices: ``slip_classes`` (schema 3) or ``positive``."""
+    if "slip_classes" not in f.obj:
+        assert classes is not None
+        assert positive is not None
+        return (classes.index(positive),)
+    assert classes is not None  # the argmax rule requires classes
+    slip = f.strings("slip_classes", unique=True)
+    unknown = [c for c in slip if c not in classes]
+    if unknown:
+        raise f.error(
+            "slip_classes",
+            f"names {_short_list(unknown)} that decision.classes does not list "
+            f"({_short_list(classes)})",
+        )
+    if positive not in slip:
+        raise f.error(
+            "slip_classes",
+            f"must hold decision.positive {positive!r}; got {_short_list(slip)}",
+        )
+    return tuple(classes.index(c) for c in slip)
+
+
+def _short_list(names: Any, limit: int = 8) -> str:
+    """``[a, b, ...]`` with at most ``limit`` names (a message stays one short line)."""
+    names = list(names)
+    shown = ", ".join(repr(n)[:40] for n in names[:limit])
+    return f"[{shown}{', ...' if len(names) > limit else ''}]"
+
+
+def _decision(
+    top: Fields, outputs: tuple[TensorSpec, ...], version: int = SCHEMA_VERSION
+) -> DecisionSpec:
     f = top.child("decision")
-    f.only(("output", "rule", "column", "classes", "positive", "strict"))
+    allowed = ["output", "rule", "column", "classes", "positive", "strict"]
+    if version >= 3:
+        allowed.append("slip_classes")
+    f.only(allowed)
     names = [o.name for o in outputs]
     output = f.string("output", choices=names)
     rule = f.string("rule", choices=("threshold", "argmax"))
@@ -411,6 +486,7 @@ def _decision(top: Fields, outputs: tuple[TensorSpec, ...]) -> DecisionSpec:
         positive = f.string("positive", choices=classes)
     elif "positive" in f.obj:
         raise f.error("positive", "needs decision.classes to name the classes")
+    slip_columns: tuple[int, ...] = ()
     if rule == "argmax":
         if classes is None:
             raise f.error(
@@ -422,6 +498,7 @@ def _decision(top: Fields, outputs: tuple[TensorSpec, ...]) -> DecisionSpec:
             )
         assert positive is not None
         column = classes.index(positive)
+        slip_columns = _slip_columns(f, classes, positive)
         if top.raw("threshold", None) is not None:
             raise top.error("threshold", "must be null or absent for the argmax rule")
         threshold = None
@@ -435,12 +512,59 @@ def _decision(top: Fields, outputs: tuple[TensorSpec, ...]) -> DecisionSpec:
                 f"the threshold rule has two classes (negative, positive); got {list(classes)}",
             )
         threshold = top.number("threshold")
+        if "slip_classes" in f.obj:
+            raise f.error(
+                "slip_classes",
+                "is used by the argmax rule only (the threshold rule's slip class is "
+                "decision.positive)",
+            )
     strict = f.boolean("strict", False)
-    return DecisionSpec(output, rule, column, classes, positive, threshold, strict)
+    return DecisionSpec(
+        output, rule, column, classes, positive, threshold, strict, slip_columns
+    )
+
+
+def _training(top: Fields, version: int) -> dict[str, Any]:
+    """The ``training`` object: free provenance JSON, with its schema-3 fields checked."""
+    training = top.child("training", {})
+    if "data_fingerprint" in training.obj:
+        training.string("data_fingerprint")
+    if "metrics" in training.obj:
+        training.child("metrics")
+    if version < 3:
+        return dict(training.obj)
+    for key in ("refit_on_all_data", "held_out"):
+        if key in training.obj:
+            training.boolean(key)
+    if "scored_on" in training.obj:
+        _text(training, "scored_on")
+    if "replay" in training.obj:
+        rep = training.child("replay")
+        rep.only(("trials", "frames", "held_out", "by_class", "note"))
+        rep.integer("trials", minimum=0, maximum=MAX_FRAMES)
+        rep.integer("frames", minimum=0, maximum=MAX_VALUES)
+        rep.boolean("held_out")
+        if "note" in rep.obj:
+            _text(rep, "note")
+        if "by_class" in rep.obj:
+            by = rep.child("by_class")
+            if len(by.obj) > MAX_FRAMES:
+                raise rep.error("by_class", f"lists more than {MAX_FRAMES} classes")
+            for cls in by.obj:
+                by.integer(cls, minimum=0, maximum=MAX_FRAMES)
+    return dict(training.obj)
+
+
+def _text(f: Fields, key: str) -> str:
+    """A non-empty string of at most :data:`MAX_TEXT` characters."""
+    value = f.string(key)
+    if len(value) > MAX_TEXT:
+        raise f.error(key, f"is {len(value)} characters long; at most {MAX_TEXT}")
+    return value
 
 
 def validate_manifest(obj: object, file: str = MANIFEST_FILE) -> Manifest:
-    """Check a decoded manifest against schema version 2 (types, bounds, cross-field rules).
+    """Check a decoded manifest against schema version 2 or 3 (types, bounds, cross-field rules).
 
     Parameters
     ----------
@@ -478,10 +602,10 @@ def validate_manifest(obj: object, file: str = MANIFEST_FILE) -> Manifest:
             "format", f"must be {FORMAT!r}; got {fmt!r} (not a slipkit bundle)"
         )
     version = top.integer("schema_version")
-    if version != SCHEMA_VERSION:
+    if version not in READ_VERSIONS:
         raise top.error(
             "schema_version",
-            f"this runtime reads version {SCHEMA_VERSION}; got {version} "
+            f"this runtime reads versions {', '.join(map(str, READ_VERSIONS))}; got {version} "
             "(re-export the bundle with this slipkit, or install the slipkit version "
             "that wrote it)",
         )
@@ -504,15 +628,28 @@ def validate_manifest(obj: object, file: str = MANIFEST_FILE) -> Manifest:
             f"must be one of {sorted(INPUT_DTYPES.values())}; got {inputs[0].dtype!r}",
         )
     outputs = _tensors(top, "outputs", need_shape=False)
-    decision = _decision(top, outputs)
+    decision = _decision(top, outputs, version)
     deb = top.child("debounce")
     deb.only(("k",))
     budget_f = top.child("budget_ms")
-    budget_f.only(("frame_period", "p99"))
+    budget_f.only(
+        ("frame_period", "p99", "source") if version >= 3 else ("frame_period", "p99")
+    )
     budget = Budget(
         budget_f.number("frame_period", positive=True, maximum=MAX_FRAME_PERIOD_MS),
         budget_f.number("p99", positive=True, maximum=MAX_FRAME_PERIOD_MS),
+        budget_f.string("source", choices=BUDGET_SOURCES)
+        if "source" in budget_f.obj
+        else None,
     )
+    if budget.source == "data_rate_hz":
+        want = 1000.0 / frame.rate_hz
+        if abs(budget.frame_period_ms - want) > 1e-6 * want:
+            raise budget_f.error(
+                "frame_period",
+                f"is {budget.frame_period_ms:g} ms but budget_ms.source is data_rate_hz "
+                f"and frame.rate_hz {frame.rate_hz:g} Hz gives {want:g} ms",
+            )
     if budget.p99_ms > budget.frame_period_ms:
         raise budget_f.error(
             "p99",
@@ -522,11 +659,7 @@ def validate_manifest(obj: object, file: str = MANIFEST_FILE) -> Manifest:
     opset = top.integer("opset", minimum=1, maximum=MAX_OPSET)
     prod = top.child("producer")
     producer = {k: prod.string(k) for k in prod.obj}
-    training = top.child("training", {})
-    if "data_fingerprint" in training.obj:
-        training.string("data_fingerprint")
-    if "metrics" in training.obj:
-        training.child("metrics")
+    training = _training(top, version)
     files_f = top.child("files")
     files: dict[str, str] = {}
     for fname in files_f.obj:
@@ -568,7 +701,7 @@ def validate_manifest(obj: object, file: str = MANIFEST_FILE) -> Manifest:
         session=session,
         opset=opset,
         producer=producer,
-        training=dict(training.obj),
+        training=training,
         files=files,
         raw=dict(top.obj),
     )
@@ -826,7 +959,7 @@ def _check_digest(obj: Any, mfile: str) -> None:
     if not (
         isinstance(obj, dict)
         and obj.get("format") == FORMAT
-        and obj.get("schema_version") == SCHEMA_VERSION
+        and obj.get("schema_version") in READ_VERSIONS
     ):
         return
     top = Fields(mfile, obj)
@@ -851,7 +984,7 @@ def load_bundle(
 
     Order of checks: the folder and ``manifest.json`` exist; the manifest is strict
     JSON of bounded size and depth, its ``manifest_sha256`` matches its content, and
-    it matches schema version 2 (types, bounds, cross-field rules); every file in
+    it matches schema version 2 or 3 (types, bounds, cross-field rules); every file in
     ``files`` exists and has the listed sha256 (``model.onnx`` always); only then is
     the graph given to onnxruntime; its input/output names, dtypes and static
     shapes must match the manifest, the preprocessing must produce exactly the

@@ -23,7 +23,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from slipkit._files import atomic_write_text
+from slipkit._files import atomic_write_text, check_out_file
 from slipkit.errors import SlipkitError
 from slipkit.runtime.bundle import (
     DEFAULT_DEADLINE_S,
@@ -152,6 +152,16 @@ def _summary_lines(summary: dict[str, Any], source: str) -> list[str]:
         f"{s['slip_decisions']} slip, {s['declared']} declared (debounce k={s['debounce_k']})"
         + (f", first declared at {first:.4f} s" if first is not None else "")
     ]
+    by_class = s.get("decisions_by_class")
+    if by_class:
+        slip = set(s.get("slip_classes") or ())
+        lines.append(
+            "decisions by class: "
+            + ", ".join(
+                f"{c}{'*' if c in slip else ''} {n}" for c, n in by_class.items()
+            )
+            + " (* slip class)"
+        )
     reasons = ", ".join(f"{k} {v}" for k, v in s["bad_by_reason"].items() if v)
     lines.append(
         f"flagged: {s['bad_frames']} bad frames"
@@ -173,6 +183,30 @@ def _summary_lines(summary: dict[str, Any], source: str) -> list[str]:
         f"{verdict}; {s['over_budget']} decisions over budget, {s['over_period']} over the frame period"
     )
     return lines
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.resolve() == b.resolve()
+    except OSError:
+        return False
+
+
+def _replay_line(info: dict[str, Any]) -> str:
+    """What the bundle's own replay holds (manifest ``training.replay``, schema 3)."""
+    by_class = info.get("by_class") or {}
+    classes = (
+        " of classes " + ", ".join(f"{c} {n}" for c, n in by_class.items())
+        if by_class
+        else ""
+    )
+    held = (
+        "held-out trials"
+        if info.get("held_out")
+        else "held_out: false (the model was refit on all data): checks parity and "
+        "latency, not accuracy"
+    )
+    return f"replay: {info.get('trials')} trials{classes}; {held}"
 
 
 def _address(text: str) -> tuple[str, int]:
@@ -215,6 +249,9 @@ def _check_args(args: argparse.Namespace) -> None:
         )
     if args.udp is not None:
         _address(args.udp)
+    if args.json is not None:
+        # Before any work: never over a dataset's, run's or bundle's own files.
+        check_out_file(args.json, option="--json")
 
 
 def _replay(bundle: Bundle, path: Path | None) -> tuple[Any, Any, str]:
@@ -269,6 +306,7 @@ def run(argv: Sequence[str] | None = None) -> int:
         status = 0
     else:
         loop = StreamLoop(bundle, io_binding=args.io_binding)
+        replay_line: str | None = None
         if args.udp is not None:
             host, port = _address(args.udp)
             try:
@@ -303,12 +341,20 @@ def run(argv: Sequence[str] | None = None) -> int:
                 frames, times = frames[: args.frames], times[: args.frames]
             result = loop.run(ReplaySource(frames, times))
             udp = None
+            own = bundle.replay_path is not None and (
+                args.replay is None or _same_file(args.replay, bundle.replay_path)
+            )
+            replay_info = bundle.manifest.training.get("replay")
+            if own and isinstance(replay_info, dict):
+                replay_line = _replay_line(replay_info)
         out = result.summary()
         out["source"] = name
         out["io_binding"] = bool(args.io_binding)
         out["session"] = bundle.session_spec.to_json()
         for line in _summary_lines(out, Path(name).name if udp is None else name):
             print(line)
+        if udp is None and replay_line is not None:
+            print(replay_line)
         if udp is not None:
             out["udp"] = udp
             print(

@@ -5,7 +5,7 @@ once a window is full and on every ``hop``-th frame it runs the bundle's
 preprocessing, writes the result into a preallocated graph input, calls the session
 once for the score output only, applies the decision rule (``score >= threshold``, with
 the class order and strictness of :class:`~slipkit.runtime.bundle.DecisionSpec`, or
-``argmax == positive``) and the debounce (slip is *declared* on the ``k``-th
+``argmax`` in the slip classes) and the debounce (slip is *declared* on the ``k``-th
 consecutive slip decision, as :func:`slipkit.models.online.debounce` does offline).
 Latency runs from the frame's arrival (``time.perf_counter_ns`` taken by the source)
 to the declared decision, so it includes buffering and preprocessing; writing the
@@ -106,9 +106,12 @@ class LoopResult:
     timestamp : ndarray of float64
         That frame's sensor time, s.
     score : ndarray of float64
-        The score the rule read (``argmax``: the positive class's entry).
+        The score the rule read (``argmax``: the largest slip-class entry).
     slip : ndarray of bool
         Per-call decision before debounce.
+    klass : ndarray of int64
+        Per-call decided class, an index into ``classes`` (``argmax``: the largest
+        entry; ``threshold``: 1 above, 0 below); -1 when the bundle names no classes.
     declared : ndarray of bool
         Slip declared (``k`` consecutive slip decisions ending here).
     latency_ns : ndarray of int64
@@ -132,6 +135,10 @@ class LoopResult:
         Of those, windows whose graph input or score came out NaN or infinite.
     gaps : int
         Timestamps more than ``max_gap_periods`` frame periods after the previous one.
+    classes : tuple of str or None
+        The decision's class names (None: an unclassed threshold on a regressor).
+    slip_classes : tuple of str
+        The classes that count as slip.
     """
 
     frame: NDArray[np.int64]
@@ -151,6 +158,20 @@ class LoopResult:
     skipped_windows: int = 0
     nonfinite_windows: int = 0
     gaps: int = 0
+    klass: NDArray[np.int64] = field(
+        default_factory=lambda: np.zeros(0, dtype=np.int64)
+    )
+    classes: tuple[str, ...] | None = None
+    slip_classes: tuple[str, ...] = ()
+
+    def class_counts(self) -> dict[str, int] | None:
+        """Decisions per class, in class order (None when the bundle names no classes)."""
+        if self.classes is None:
+            return None
+        counts = np.bincount(
+            self.klass[self.klass >= 0], minlength=len(self.classes)
+        ).tolist()
+        return {c: int(n) for c, n in zip(self.classes, counts, strict=False)}
 
     def bad_counts(self) -> dict[str, int]:
         """Flagged frames per reason (every reason of :data:`BAD_REASONS`, zeros included)."""
@@ -162,7 +183,9 @@ class LoopResult:
     def summary(self) -> dict[str, Any]:
         """Counts and latency percentiles, ms, against the budget (JSON-ready).
 
-        ``decisions`` counts the valid (scored) windows; ``bad_frames``,
+        ``decisions`` counts the valid (scored) windows, ``decisions_by_class`` the
+        decided class of each (None without classes) and ``slip_decisions`` those
+        whose class is one of ``slip_classes``; ``bad_frames``,
         ``bad_by_reason``, ``skipped_windows``, ``nonfinite_windows`` and ``gaps`` count
         what the loop flagged (module docstring, *Bad frames*).
         """
@@ -175,6 +198,8 @@ class LoopResult:
             "nonfinite_windows": self.nonfinite_windows,
             "gaps": self.gaps,
             "decisions": len(self.slip),
+            "decisions_by_class": self.class_counts(),
+            "slip_classes": list(self.slip_classes),
             "slip_decisions": int(self.slip.sum()),
             "declared": int(self.declared.sum()),
             "debounce_k": self.debounce_k,
@@ -298,12 +323,21 @@ class StreamLoop:
         self._out_names = [d.output]
         self._argmax = d.rule == "argmax"
         self._col = d.column
+        # argmax: the slip columns as an index array (max over them is the score) and
+        # a lookup table class index -> is slip.
+        self._slip_cols = np.asarray(d.slip_columns or (d.column,), dtype=np.intp)
+        self._one_slip_col = len(self._slip_cols) == 1
+        self._classes = d.classes
+        self._has_classes = d.classes is not None
         self._thr = -math.inf if d.threshold is None else d.threshold
         self._strict = d.strict
         self._slip_above = d.slip_above
         self._session = bundle.session
         self._binding: ort.IOBinding | None = None
         probe = np.asarray(self._session.run(self._out_names, self._feed)[0])
+        self._is_slip = np.zeros(max(probe.size, 1), dtype=bool)
+        if self._argmax:
+            self._is_slip[self._slip_cols[self._slip_cols < probe.size]] = True
         if io_binding:
             self._out = np.empty_like(probe)
             self._binding = self._session.io_binding()
@@ -352,6 +386,7 @@ class StreamLoop:
         self._slip = np.zeros(cap, dtype=bool)
         self._decl = np.zeros(cap, dtype=bool)
         self._lat = np.zeros(cap, dtype=np.int64)
+        self._klass = np.zeros(cap, dtype=np.int64)
 
     def window(self) -> NDArray[np.float64]:
         """A copy of the latest ``window`` frames, oldest first (zeros before they arrive)."""
@@ -365,7 +400,7 @@ class StreamLoop:
         return self._out
 
     def _grow(self) -> None:
-        for name in ("_frame", "_ts", "_score", "_slip", "_decl", "_lat"):
+        for name in ("_frame", "_ts", "_score", "_slip", "_decl", "_lat", "_klass"):
             old = getattr(self, name)
             new = np.zeros(2 * len(old), dtype=old.dtype)
             new[: len(old)] = old
@@ -458,17 +493,28 @@ class StreamLoop:
         else:
             self._session.run_with_iobinding(self._binding)
             score = self._out
-        s = float(score.flat[self._col])
-        if not math.isfinite(s):
-            # NaN compares False with any threshold: scoring it would read as a
-            # silent "no slip". An overflow inside the graph is skipped instead.
-            self._skip_nonfinite()
-            return None
         if self._argmax:
-            slip = int(score.argmax()) == self._col
+            # max propagates a NaN; a NaN elsewhere would steer argmax, so all finite.
+            s = float(
+                score.flat[self._col]
+                if self._one_slip_col
+                else score.flat[self._slip_cols].max()
+            )
+            cls = int(score.argmax())
+            if not (math.isfinite(s) and math.isfinite(float(score.flat[cls]))):
+                self._skip_nonfinite()
+                return None
+            slip = bool(self._is_slip[cls])
         else:
+            s = float(score.flat[self._col])
+            if not math.isfinite(s):
+                # NaN compares False with any threshold: scoring it would read as a
+                # silent "no slip". An overflow inside the graph is skipped instead.
+                self._skip_nonfinite()
+                return None
             above = s > self._thr if self._strict else s >= self._thr
             slip = above == self._slip_above
+            cls = int(above) if self._has_classes else -1
         run = self._run = self._run + 1 if slip else 0
         declared = run >= self._k
         t1 = time.perf_counter_ns()
@@ -479,6 +525,7 @@ class StreamLoop:
         self._ts[i] = math.nan if timestamp is None else timestamp
         self._score[i] = s
         self._slip[i] = slip
+        self._klass[i] = cls
         self._decl[i] = declared
         self._lat[i] = t1 - t0
         self._n = i + 1
@@ -588,4 +635,7 @@ class StreamLoop:
             skipped_windows=self._skipped,
             nonfinite_windows=self._nonfinite_windows,
             gaps=self._gaps,
+            klass=self._klass[:n].copy(),
+            classes=m.decision.classes,
+            slip_classes=m.decision.slip_classes,
         )
