@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import json
 from pathlib import Path
 
@@ -10,12 +11,20 @@ import pandas as pd
 import pytest
 import torch
 from hydra import compose, initialize_config_dir
+from sklearn.dummy import DummyClassifier
+from sklearn.linear_model import LogisticRegression
+from sklearn.pipeline import make_pipeline
+from sklearn.preprocessing import StandardScaler
 from tests.strategies import make_dataset
 
 import slipkit
+from slipkit.compare.adapters import _window_controls
+from slipkit.compare.report import CONTROLS, markdown_table
 from slipkit.data import save_dataset
 from slipkit.errors import SlipkitError
+from slipkit.models.selection import CandidateSearch
 from slipkit.models.window import WindowMLP
+from slipkit.models.window_features import WindowStatistics
 from slipkit.sim.commands import build_scene
 from slipkit.train.commands import evaluate_main, train_main
 from slipkit.train.tasks.slip_type import (
@@ -141,7 +150,16 @@ def test_train_and_evaluate_end_to_end_on_the_simulated_lift(tmp_path, capsys):
     assert curve["t_rel_s"].between(-0.2 - 1e-9, 0.3 + 1e-9).all()
     printed = capsys.readouterr().out
     assert "per window" in printed
+    assert "majority class" in printed
     assert str(run) == printed.strip().splitlines()[-1]
+    row = _window_controls(metrics)
+    assert (
+        metrics["controls"]["dynamics"]["window"]["accuracy"]
+        == row["dynamics_accuracy"]
+    )
+    assert metrics["sequence"]["balanced_accuracy"] == row["sequence_balanced_accuracy"]
+    table = markdown_table(pd.DataFrame([{"estimator": "mlp", **row}]), CONTROLS)
+    assert "| estimator | sequence acc | sequence bal. | first frame only |" in table
 
     with initialize_config_dir(
         config_dir=str(slipkit.config_dir()), version_base="1.3"
@@ -193,3 +211,70 @@ def test_dos_direction_on_unseen_objects_with_its_controls(shared_data, tmp_path
     assert m["first_frame_accuracy"] > 2 * m["chance"]
     assert 0.0 <= m["dynamics_accuracy"] <= 1.0
     assert 0.0 <= m["sequence_accuracy"] <= 1.0
+
+
+def search_model() -> CandidateSearch:
+    """Statistics + logistic regression (two C) against the majority class, no progress bar."""
+    stats_lr = make_pipeline(
+        WindowStatistics(n_channels=3), StandardScaler(), LogisticRegression()
+    )
+    return CandidateSearch(
+        candidates={"majority": DummyClassifier(), "stats_lr": stats_lr},
+        grids={"stats_lr": {"logisticregression__C": [0.01, 1.0]}},
+        verbose=False,
+    )
+
+
+def test_selection_is_per_fold_and_test_labels_cannot_move_it(tmp_path):
+    """Fold 0's choice is made on its training objects: swapping its test labels leaves it alone."""
+    ds = make_dataset(n_trials=18, n_frames=60, n_objects=3, with_events=False)
+    task = tiny_task(split="group", folds=3)
+    m = task.fit(search_model(), ds, seed=0, out=tmp_path).metrics
+    sel = m["selection"]
+    assert ("leave-one-object-out", "balanced_accuracy") == (sel["cv"], sel["scoring"])
+    assert 3 == len(sel["candidates"]) == len(m["split"]["test"])
+    assert [0, 1, 2] == [f["fold"] for f in sel["per_fold"]]
+    assert 3 == sel["n_groups"]  # the saved model chose over every object
+    test0 = list(m["split"]["test"][0])
+    swapped = copy.deepcopy(ds)
+    rows = swapped.trials["trial_id"].isin(test0)
+    swapped.trials.loc[rows, "slip_class"] = swapped.trials.loc[rows, "slip_class"].map(
+        {"linear": "rotational", "rotational": "linear"}
+    )
+    m2 = task.fit(search_model(), swapped, seed=0, out=tmp_path).metrics
+    assert sel["per_fold"][0] == m2["selection"]["per_fold"][0]
+    assert m["test"]["confusion"] != m2["test"]["confusion"]
+
+
+@pytest.mark.realdata
+@pytest.mark.slow  # ~15-30 s: leave-one-object-out selection over six objects
+def test_dos_selection_by_unseen_objects_with_its_controls(shared_data, tmp_path):
+    """BioTacSP-DoS, 200 ms statistics: selection on the 6 training objects, controls beside."""
+    from slipkit.data.importers.biotacsp_dos import read_biotacsp_dos
+
+    ds = read_biotacsp_dos(shared_data / "biotacsp-dos")
+    task = WindowClassification(
+        label="slip_class",
+        window=200,
+        hop=200,
+        unit="ms",
+        onset_label=None,
+        dynamics="trial",
+        split="group",
+        test_size=0.25,
+    )
+    stats_lr = make_pipeline(
+        WindowStatistics(n_channels=24), StandardScaler(), LogisticRegression(C=0.1)
+    )
+    model = CandidateSearch(
+        candidates={"stats_lr": stats_lr},
+        grids={"stats_lr": {"windowstatistics__subtract_first": [False, True]}},
+        verbose=False,
+    )
+    m = task.fit(model, ds, seed=0, out=tmp_path).metrics
+    (fold,) = m["selection"]["per_fold"]
+    assert 6 == m["selection"]["n_groups"]  # one split: the saved model is the fold's
+    assert fold["best_score"] > 2 * m["chance"]
+    assert {"first_frame", "dynamics", "majority"} == set(m["controls"])
+    assert m["accuracy"] > 3 * m["chance"]
+    assert m["controls"]["majority"]["window"]["accuracy"] < 2 * m["chance"]

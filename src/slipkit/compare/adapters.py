@@ -297,6 +297,7 @@ def adapt_windows(view: RunView) -> Evaluation:
         window_ms=float(window["ms"]),
         decision_frames=int(window["frames"]),
     )
+    row.update(_window_controls(m))
     vs_time = None
     path = view.folder / "accuracy_vs_time.csv"
     if path.is_file():
@@ -317,6 +318,27 @@ def adapt_windows(view: RunView) -> Evaluation:
         vs_width=vs_width,
         split=m["split"],
     )
+
+
+def _window_controls(m: Mapping[str, Any]) -> dict[str, float]:
+    """Per-sequence scores and the controls beside the headline (report's controls table).
+
+    ``sequence_*``: majority vote of a trial's windows; ``first_frame_*``: the model
+    fitted on each trial's first frame only; ``dynamics_*``: on windows minus the
+    trial's first frame; ``majority_*``: the training side's most frequent class
+    (window accuracy and balanced accuracy of each).
+    """
+    out: dict[str, float] = {}
+    seq = m.get("sequence") or {}
+    if seq:
+        out["sequence_accuracy"] = float(seq["accuracy"])
+        out["sequence_balanced_accuracy"] = float(seq["balanced_accuracy"])
+    for name, c in (m.get("controls") or {}).items():
+        win = c.get("window") or {}
+        if win:
+            out[f"{name}_accuracy"] = float(win["accuracy"])
+            out[f"{name}_balanced_accuracy"] = float(win["balanced_accuracy"])
+    return out
 
 
 # -- stream detectors -----------------------------------------------------------------------

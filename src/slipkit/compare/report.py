@@ -30,6 +30,18 @@ MAIN = (
     ("missed", "missed", "{:.0f}"),
     ("false_alarms_per_min", "false alarms / min", "{:.2f}"),
 )
+#: the window tasks' controls beside the headline (columns from adapters._window_controls)
+CONTROLS = (
+    ("estimator", "estimator", "{}"),
+    ("accuracy", "window acc", "{:.3f}"),
+    ("balanced_accuracy", "window bal.", "{:.3f}"),
+    ("sequence_accuracy", "sequence acc", "{:.3f}"),
+    ("sequence_balanced_accuracy", "sequence bal.", "{:.3f}"),
+    ("first_frame_accuracy", "first frame only", "{:.3f}"),
+    ("dynamics_accuracy", "dynamics only", "{:.3f}"),
+    ("dynamics_balanced_accuracy", "dynamics bal.", "{:.3f}"),
+    ("majority_accuracy", "majority class", "{:.3f}"),
+)
 COST = (
     ("estimator", "estimator", "{}"),
     ("fit_s", "fit (s, all fits)", "{:.3g}"),
@@ -176,6 +188,20 @@ def write_report(
     if reg_cols:
         spec = [("estimator", "estimator", "{}")] + [(c, c, "{:.4g}") for c in reg_cols]
         lines += ["Per axis (test side):", "", markdown_table(df, spec), ""]
+    control_cols = [c for c, _, _ in CONTROLS[3:] if c in df]
+    if control_cols and df[control_cols].notna().any().any():
+        lines += [
+            "## Controls",
+            "",
+            "Per window and per sequence (majority vote of a trial's windows), beside what "
+            "the same model scores from each trial's first frame only (static contact), "
+            "from dynamics only (each trial's first frame subtracted) and what the "
+            "training side's majority class scores. A headline close to the first-frame "
+            "control reads the static contact, not the slip.",
+            "",
+            markdown_table(df, CONTROLS),
+            "",
+        ]
     lines += ["## Cost", "", markdown_table(df, COST), ""]
     titles = {
         "pareto": "Accuracy against compute per frame (Pareto front)",
@@ -227,4 +253,4 @@ def write_report(
     return path
 
 
-__all__ = ["markdown_table", "verdict", "write_report"]
+__all__ = ["CONTROLS", "markdown_table", "verdict", "write_report"]
