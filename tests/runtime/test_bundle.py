@@ -279,3 +279,123 @@ def test_write_refuses_replay_of_the_wrong_shape(tmp_path: Path) -> None:
             replay=(np.zeros((10, 5)), np.arange(10.0)),
         )
     assert [] == list(tmp_path.iterdir())
+
+
+def _argmax(m: dict[str, Any], **extra: Any) -> None:
+    """Turn the linear case's manifest into a (schema 3) argmax one over two classes."""
+    m.pop("threshold", None)
+    m["decision"] = {
+        "output": "score",
+        "rule": "argmax",
+        "classes": ["slip", "static"],
+        "positive": "slip",
+        **extra,
+    }
+
+
+@pytest.mark.parametrize(
+    ("edit", "field", "problem"),
+    [
+        (
+            lambda m: _argmax(m, slip_classes=["slip", "x"]),
+            "decision.slip_classes",
+            "does not list",
+        ),
+        (lambda m: _argmax(m, slip_classes=[]), "decision.slip_classes", "non-empty"),
+        (
+            lambda m: _argmax(m, slip_classes=["static"]),
+            "decision.slip_classes",
+            "positive",
+        ),
+        (
+            lambda m: _argmax(m, slip_classes=["slip", "slip"]),
+            "decision.slip_classes",
+            "repeat",
+        ),
+        (
+            lambda m: m["decision"].__setitem__("slip_classes", ["slip"]),
+            "decision.slip_classes",
+            "argmax rule only",
+        ),
+        (
+            lambda m: m["budget_ms"].__setitem__("source", "guess"),
+            "budget_ms.source",
+            "one of",
+        ),
+        (
+            lambda m: m["budget_ms"].update(
+                source="data_rate_hz", frame_period=3.0, p99=0.3
+            ),
+            "budget_ms.frame_period",
+            "gives 10 ms",
+        ),
+        (
+            lambda m: m["training"].__setitem__("refit_on_all_data", "yes"),
+            "training.refit_on_all_data",
+            "true or false",
+        ),
+        (
+            lambda m: m["training"].__setitem__("scored_on", "x" * 5000),
+            "training.scored_on",
+            "at most 4096",
+        ),
+        (
+            lambda m: m["training"].__setitem__(
+                "replay", {"trials": -1, "frames": 0, "held_out": True}
+            ),
+            "training.replay.trials",
+            ">= 0",
+        ),
+        (
+            lambda m: m["training"].__setitem__(
+                "replay",
+                {"trials": 1, "frames": 1, "held_out": True, "by_class": {"n": 1.5}},
+            ),
+            "training.replay.by_class.n",
+            "integer",
+        ),
+        (
+            lambda m: (
+                m.__setitem__("schema_version", 2) or _argmax(m, slip_classes=["slip"])
+            ),
+            "decision.slip_classes",
+            "not a known field",
+        ),
+    ],
+)
+def test_schema3_fields_are_checked_and_named(
+    case: LinearCase, edit: Any, field: str, problem: str
+) -> None:
+    """slip_classes, budget_ms.source and the training provenance are bounded and named when wrong."""
+    case.edit_manifest(lambda m: (m.setdefault("training", {}), edit(m)))
+    with pytest.raises(BundleError) as info:
+        load_bundle(case.path)
+    assert (field, True) == (info.value.field, problem in str(info.value))
+
+
+def test_schema2_bundle_still_loads(case: LinearCase) -> None:
+    """A version-2 manifest (no schema-3 fields) loads with this runtime."""
+    case.edit_manifest(lambda m: m.__setitem__("schema_version", 2))
+    assert 2 == load_bundle(case.path).manifest.raw["schema_version"]
+
+
+def test_budget_source_and_provenance_load(case: LinearCase) -> None:
+    """A budget from the data's rate (100 Hz: 10 ms) and valid provenance load as written."""
+
+    def edit(m: dict[str, Any]) -> None:
+        m["budget_ms"] = {"frame_period": 10.0, "p99": 1.0, "source": "data_rate_hz"}
+        m["training"] = {
+            "refit_on_all_data": True,
+            "held_out": False,
+            "scored_on": "2-fold CV",
+            "replay": {
+                "trials": 3,
+                "frames": 200,
+                "held_out": False,
+                "by_class": {"a": 3},
+            },
+        }
+
+    case.edit_manifest(edit)
+    m = load_bundle(case.path).manifest
+    assert ("data_rate_hz", True) == (m.budget.source, m.training["refit_on_all_data"])

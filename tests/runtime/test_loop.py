@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -256,3 +257,56 @@ def test_standardize_matches_numpy(
         "m.json",
     )
     np.testing.assert_array_equal((x - mean) / scale, pipe(x))
+
+
+def _multiclass_bundle(root: Path, decision_extra: dict[str, Any]) -> Path:
+    """A 4-class linear argmax bundle (classes n e s t) over 4-frame windows."""
+    rng = np.random.default_rng(5)
+    man = manifest(
+        12,
+        threshold=None,
+        decision={
+            "output": "score",
+            "rule": "argmax",
+            "classes": ["n", "e", "s", "t"],
+            "positive": "n",
+            **decision_extra,
+        },
+        k=1,
+    )
+    return write_bundle(root / "mc", linear_graph(rng.normal(size=(12, 4)), 0.0), man)
+
+
+def test_argmax_any_slip_class_is_a_slip_decision_counted_per_class(
+    tmp_path: Path,
+) -> None:
+    """slip_classes [n, e, s]: slip wherever the decided class is not t; the summary counts each class."""
+    bundle = load_bundle(
+        _multiclass_bundle(tmp_path, {"slip_classes": ["n", "e", "s"]})
+    )
+    x = frames(80, seed=6)
+    result = StreamLoop(bundle).run(ReplaySource(x, np.arange(80) / RATE_HZ))
+    w = np.random.default_rng(5).normal(size=(12, 4))
+    decided = (windows(x.astype(np.float64), 4).reshape(77, 12) @ w).argmax(axis=1)
+    expected = dict(
+        zip("nest", np.bincount(decided, minlength=4).tolist(), strict=True)
+    )
+    summary = result.summary()
+    assert expected == summary["decisions_by_class"]
+    assert ["n", "e", "s"] == summary["slip_classes"]
+    assert int(np.sum(decided != 3)) == summary["slip_decisions"]
+    np.testing.assert_array_equal(decided != 3, result.slip)
+
+
+def test_threshold_bundle_counts_its_two_classes(case: LinearCase) -> None:
+    """A binary threshold bundle counts below / above as its two classes; slip is the positive one."""
+    result = StreamLoop(load_bundle(case.path)).run(
+        ReplaySource(case.frames, case.timestamps)
+    )
+    summary = result.summary()
+    slip = int(result.slip.sum())
+    expected = {"static": len(result.slip) - slip, "slip": slip}
+    assert (expected, ["slip"]) == (
+        summary["decisions_by_class"],
+        summary["slip_classes"],
+    )

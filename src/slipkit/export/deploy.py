@@ -177,28 +177,23 @@ class Deployment:
     def replay_trials(self, max_frames: int | None = None) -> list[HeldOutTrial]:
         """Whole held-out trials for ``replay.npz``: every class and group, within ``max_frames``.
 
-        Trials are taken round-robin over the strata (class, group), in the order
-        each stratum first appears, the k-th trial of every stratum before any
-        (k+1)-th, so a bounded replay holds trials of every class and object from
-        the whole test side (not the first trials, which a class-ordered dataset
-        would fill with its first classes). Within a stratum the k-th pick is
-        spread over its trials (first, middle, quarters, ...: :func:`_spread`). A trial that would exceed
-        ``max_frames`` is passed over for a shorter one; the chosen trials keep
-        their original order. When no whole trial fits, the first trial is cut to
-        ``max_frames``.
+        The trials are ranked round-robin over the classes (each class gives its
+        next trial before any class gives another), and within a class
+        round-robin over its groups (objects), class ``c`` starting at its
+        ``c``-th group so that the first round already spans the objects; within
+        a (class, group) the picks are spread over its trials (:func:`_spread`).
+        So a bounded replay holds trials of every class and object from the
+        whole test side, not the first trials, which a class-ordered dataset
+        would fill with its first classes. In that rank, a trial that would
+        exceed ``max_frames`` is passed over for a shorter one; the chosen trials
+        keep their original order. When no whole trial fits, the first trial is
+        cut to ``max_frames``.
         """
         if max_frames is None:
             return list(self.trials)
-        strata: dict[tuple[str | None, str | None], list[int]] = {}
-        for i, tr in enumerate(self.trials):
-            strata.setdefault((tr.label, tr.group), []).append(i)
-        strata = {k: [v[j] for j in _spread(len(v))] for k, v in strata.items()}
-        order = [
-            idx[k]
-            for k in range(max((len(v) for v in strata.values()), default=0))
-            for idx in strata.values()
-            if k < len(idx)
-        ]
+        order = _stratified_order(
+            [tr.label for tr in self.trials], [tr.group for tr in self.trials]
+        )
         chosen, total = [], 0
         for i in order:
             n = len(self.trials[i].frames)
@@ -253,6 +248,35 @@ def _spread(n: int) -> list[int]:
         return int(f"{i:0{bits}b}"[::-1], 2)
 
     return [i for i in sorted(range(1 << bits), key=reversed_bits) if i < n]
+
+
+def _round_robin(lists: Sequence[Sequence[int]]) -> list[int]:
+    """The first item of every list, then every second item, ..."""
+    longest = max((len(v) for v in lists), default=0)
+    return [v[k] for k in range(longest) for v in lists if k < len(v)]
+
+
+def _stratified_order(
+    labels: Sequence[str | None], groups: Sequence[str | None]
+) -> list[int]:
+    """Indices ranked round-robin over labels, within a label over groups (rotated), spread within."""
+    by_label: dict[str | None, dict[str | None, list[int]]] = {}
+    for i, (label, group) in enumerate(zip(labels, groups, strict=True)):
+        by_label.setdefault(label, {}).setdefault(group, []).append(i)
+    group_names = list(dict.fromkeys(groups))
+    per_label = []
+    for c, by_group in enumerate(by_label.values()):
+        # Rotate the group order by the label's rank: the first round spans groups.
+        rank = sorted(
+            by_group,
+            key=lambda g: (group_names.index(g) - c) % max(len(group_names), 1),
+        )
+        per_label.append(
+            _round_robin(
+                [[by_group[g][j] for j in _spread(len(by_group[g]))] for g in rank]
+            )
+        )
+    return _round_robin(per_label)
 
 
 Deployer = Callable[[Task, Run, Dataset, Mapping[str, Any]], Deployment]
