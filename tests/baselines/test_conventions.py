@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from slipkit.baselines.fsr import FSRTouchSlip
+from slipkit.baselines.fsr import FSRTouchSlip, PolarityWarning
 from slipkit.baselines.sliptack import FixedNormalForceWarning, StickSlipSpeed
 from slipkit.errors import SlipkitError
 
@@ -173,7 +173,8 @@ def detection_rates(
     }
 
 
-ROBUST = {"confirm_events": 2, "confirm_window_s": 0.3, "peak_gap_s": 0.01}
+#: configs/detector/fsr_robust.yaml
+ROBUST = {"confirm_events": 3, "confirm_window_s": 0.4, "peak_gap_s": 0.01}
 
 
 # -- polarity -------------------------------------------------------------------------------
@@ -214,13 +215,48 @@ def test_roc_fit_without_a_touch_is_refused_not_a_traceback() -> None:
         FSRTouchSlip().fit(X, y, segments=np.repeat([0, 1], 200))
 
 
-def test_recordings_that_disagree_on_the_polarity_are_refused() -> None:
-    """One falling and one rising training recording: an error naming both."""
+def test_recordings_of_both_wirings_fall_back_to_per_recording_with_a_warning() -> None:
+    """One falling and one rising training recording: a warning naming both, sign per recording."""
     a = fsr_trials(3, 1, polarity="falling", slide=True)
     b = fsr_trials(4, 1, polarity="rising", slide=True)
     X, y, seg = stack(a + b)
-    with pytest.raises(SlipkitError, match=r"recordings \[0\] fall, \[1\] rise"):
-        FSRTouchSlip().fit(X, y, segments=seg)
+    with pytest.warns(PolarityWarning, match=r"recordings \[0\] fall, \[1\] rise"):
+        det = FSRTouchSlip(threshold=event_alpha("falling")).fit(X, y, segments=seg)
+    assert "per_recording" == det.polarity_
+
+
+@pytest.mark.parametrize("params", [{}, ROBUST], ids=["paper", "confirmed"])
+def test_per_recording_polarity_detects_either_wiring_and_streams_alike(
+    params: dict[str, object],
+) -> None:
+    """polarity=per_recording: slides of both wirings detected, bumps ignored (confirmed), batch == stream."""
+    alpha = event_alpha("falling")
+    det = FSRTouchSlip(threshold=alpha, polarity="per_recording", **params)
+    X, y, seg = stack(fsr_trials(100, 2, polarity="rising", slide=True))
+    det.fit(X, y, segments=seg)
+    for polarity in ("falling", "rising"):
+        slides = fsr_trials(200, 10, polarity=polarity, slide=True)
+        bumped = fsr_trials(500, 10, polarity=polarity, slide=False)
+        rates = detection_rates(det, slides, bumped)
+        assert rates["slides"] >= 0.95
+        if params:
+            assert rates["bumps_fired"] <= 0.10
+        for tr in slides[:1] + bumped[:1]:
+            scores, dec = det.replay(tr.v[:, None])
+            batch = det.decision_function(tr.v[:, None])
+            np.testing.assert_array_equal(batch, scores)
+            assert (batch >= alpha).tolist() == dec.tolist()
+
+
+def test_per_recording_polarity_does_not_export() -> None:
+    """A per-recording sign has no graph: a clear ExportError."""
+    from slipkit.export.detectors import export_fsr_touch_slip
+    from slipkit.export.registry import ExportError
+
+    X, y, seg = stack(fsr_trials(100, 2, polarity="rising", slide=True))
+    det = FSRTouchSlip(threshold=8.0, polarity="per_recording").fit(X, y, segments=seg)
+    with pytest.raises(ExportError, match="per_recording"):
+        export_fsr_touch_slip(det)
 
 
 def test_force_input_refuses_a_calibration_of_the_other_wiring() -> None:
@@ -277,7 +313,7 @@ def test_confirmed_graph_agrees_on_slides_and_bumps(polarity: str) -> None:
     X, _, seg = stack(trials)
     graph = export_fsr_touch_slip(det)
     report = check_detector_parity(det, graph, X, segments=seg)
-    assert (645, 2) == (graph.window, graph.features["confirm_events"])
+    assert (845, 3) == (graph.window, graph.features["confirm_events"])
     assert (True, 0) == (report["passed"], report["n_finite_mismatch"])
     assert report["max_abs_diff"] <= 1e-3 * det.threshold_
     assert det.predict(X, segments=seg).any()  # the comparison includes slip decisions
@@ -301,7 +337,8 @@ def test_one_bump_is_one_event_two_events_confirm() -> None:
     v = np.full(800, 4.5)
     v[40:] = 2.5
     v[300:305] += 0.3  # a one-block release: a bump's edge
-    det = FSRTouchSlip(threshold=10.0, **ROBUST).fit(v[:, None], np.zeros(800, int))
+    det = FSRTouchSlip(threshold=10.0, confirm_events=2, confirm_window_s=0.3)
+    det.fit(v[:, None], np.zeros(800, int))
     assert 0 == int(det.predict(v[:, None]).sum())
     v2 = v.copy()
     v2[500:505] += 0.3  # a second release 0.1 s later

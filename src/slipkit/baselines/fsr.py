@@ -58,6 +58,7 @@ detector exactly. The ``fsr_robust`` config uses ``k = 2`` over 0.3 s.
 from __future__ import annotations
 
 import math
+import warnings
 from collections import deque
 from collections.abc import Sequence
 from numbers import Integral, Real
@@ -75,6 +76,11 @@ from slipkit.physics.fsr import DEFAULT_CALIBRATION
 
 #: The voltage direction under a press for each wiring: -1 falls (the paper), +1 rises.
 PRESS_DIRECTION = {"falling": -1.0, "rising": 1.0}
+
+
+class PolarityWarning(UserWarning):
+    """Training recordings of both wirings: the detector sets the sign per recording."""
+
 
 #: ``delta`` when not given, per input: a 0.2 V drop is a ~0.1 N press with the default
 #: calibration (200x the 1 mV conditioning noise, below the FSR 402's 0.2 N threshold).
@@ -157,7 +163,7 @@ class FSRTouchSlip(StreamDetector):
         "rest_samples": [Interval(Integral, 1, None, closed="left")],
         "delta": [Interval(Real, 0, None, closed="left"), None],
         "calibration": ["array-like", None],
-        "polarity": [StrOptions({"auto", "falling", "rising"})],
+        "polarity": [StrOptions({"auto", "falling", "rising", "per_recording"})],
         "confirm_events": [Interval(Integral, 1, None, closed="left")],
         "confirm_window_s": [Interval(Real, 0, None, closed="neither")],
         "peak_gap_s": [Interval(Real, 0, None, closed="neither")],
@@ -213,7 +219,14 @@ class FSRTouchSlip(StreamDetector):
         # force (the calibration makes a press a rising force): -1.
         if self.input == "force":
             return -1.0
-        return -PRESS_DIRECTION[self._polarity]
+        polarity = self._polarity
+        if polarity == "per_recording":
+            raise SlipkitError(
+                "FSRTouchSlip(polarity='per_recording'): the slip sign is set per "
+                "recording by its first press; there is no single sign (one fixed wiring "
+                "needs polarity 'falling' or 'rising')"
+            )
+        return -PRESS_DIRECTION[polarity]
 
     @property
     def _peak_gap(self) -> int:
@@ -304,15 +317,29 @@ class FSRTouchSlip(StreamDetector):
                 "(voltage falls with force, the paper's divider) or 'rising'"
             )
         elif votes["falling"] and votes["rising"]:
-            raise SlipkitError(
+            warnings.warn(
                 "FSRTouchSlip(polarity='auto'): the training recordings disagree on the "
                 f"press direction: recordings {voted['falling'][:10]} fall, "
                 f"{voted['rising'][:10]} rise under a press (0-based, in segment order); "
-                "one detector serves one wiring -- split the data or set polarity"
+                "using polarity 'per_recording' (each recording's first press sets its "
+                "sign; no ONNX graph). Set polarity to silence this",
+                PolarityWarning,
+                stacklevel=3,
             )
+            self.polarity_ = "per_recording"
         else:
             self.polarity_ = "falling" if votes["falling"] else "rising"
-        if self.input == "force" and math.isfinite(self.rest_V_):
+        if self.polarity_ == "per_recording" and self.input == "force":
+            raise SlipkitError(
+                "FSRTouchSlip(input='force'): one calibration cannot serve recordings of "
+                f"both wirings (votes {votes}); fit one detector per wiring, or use "
+                "input='voltage'"
+            )
+        if (
+            self.input == "force"
+            and math.isfinite(self.rest_V_)
+            and self.polarity_ != "per_recording"
+        ):
             # The calibration must turn a press into a rising force.
             slope = float(np.polyval(np.polyder(self._coeffs()), self.rest_V_))
             if slope * PRESS_DIRECTION[self.polarity_] <= 0:
@@ -368,6 +395,18 @@ class FSRTouchSlip(StreamDetector):
             finite = head[np.isfinite(head)].tolist()
             rest = _sequential_sum(finite) / len(finite) if finite else np.nan
             m = means[first:]
+            if self.input != "force" and self._polarity == "per_recording":
+                # the first block further than delta from rest sets the press direction
+                with np.errstate(invalid="ignore"):
+                    away = np.abs(m - rest) > self._delta
+                if not away.any():
+                    return deriv, press
+                k = int(np.argmax(away))
+                sign = -1.0 if m[k] - rest > 0 else 1.0  # slip opposes the press
+                dm = m[k:] - means[first - 1 + k : -1]
+                deriv[first + k :] = sign * dm * self._per_s
+                press[first + k :] = sign * (rest - m[k:])
+                return deriv, press
             deriv[first:] = self._sign * (m - means[first - 1 : -1]) * self._per_s
             press[first:] = self._sign * (rest - m)
         return deriv, press
@@ -447,7 +486,8 @@ class FSRStream:
         self._wb = detector._confirm_blocks
         self._force = detector.input == "force"
         self._coeffs = detector._coeffs() if self._force else None
-        self._sign = detector._sign
+        self._per_recording = not self._force and detector._polarity == "per_recording"
+        self._fixed_sign = 0.0 if self._per_recording else detector._sign
         self._delta = detector._delta
         self._block = int(detector.block)
         self._rest_n = int(detector.rest_samples)
@@ -464,6 +504,7 @@ class FSRStream:
         self._prev = np.nan
         self._score = -np.inf
         self.touched = False
+        self._sign = self._fixed_sign  # 0: not known yet (per_recording)
         # confirmation: the last 2 gap + 1 block scores (oldest first) and the peaks
         # (block, score) inside the window
         self._block_i = -1
@@ -486,6 +527,8 @@ class FSRStream:
             mean = self._acc / self._block
             if self._i // self._block >= self._first:
                 rest = self._rest_sum / self._rest_cnt if self._rest_cnt else np.nan
+                if self._sign == 0.0 and abs(mean - rest) > self._delta:
+                    self._sign = -1.0 if mean - rest > 0 else 1.0  # first press
                 deriv = self._sign * (mean - self._prev) * self._per_s
                 self.touched = bool(self._sign * (rest - mean) > self._delta)
                 ok = self.touched and math.isfinite(deriv)

@@ -321,6 +321,12 @@ def export_fsr_touch_slip(
         sample (14 for 10 rest samples and 5-sample blocks).
     """
     check_is_fitted(detector, "threshold_")
+    if detector.input == "voltage" and detector._polarity == "per_recording":
+        raise ExportError(
+            "FSR export: polarity 'per_recording' (training data of both wirings) has no "
+            "graph: the touch gate needs one rest voltage and one slip sign; fit one "
+            "detector per wiring (polarity 'falling' or 'rising')"
+        )
     confirm = int(detector.confirm_events) > 1
     if confirm and not gate:
         raise ExportError(
@@ -1104,8 +1110,8 @@ def main() -> None:
         rows.append(
             (f"FSRTouchSlip ({input_})", det, export_fsr_touch_slip(det), Xh, sh)
         )
-    # the confirmed variant (configs/detector/fsr_robust.yaml: 2 peaks within 0.3 s)
-    det = FSRTouchSlip(confirm_events=2).fit(X, y, segments=seg)
+    # the confirmed variant (configs/detector/fsr_robust.yaml: 3 peaks within 0.4 s)
+    det = FSRTouchSlip(confirm_events=3, confirm_window_s=0.4).fit(X, y, segments=seg)
     rows.append(("FSRTouchSlip (confirmed)", det, export_fsr_touch_slip(det), Xh, sh))
     fit_ds, held = (
         _simulate("biotac_lift_slip", 3, 5),
