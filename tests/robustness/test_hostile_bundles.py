@@ -817,3 +817,41 @@ def test_any_mutated_manifest_loads_or_is_a_bundle_error(
 
 def _replay(base: LinearCase) -> ReplaySource:
     return ReplaySource(base.frames[:20], base.timestamps[:20])
+
+
+# -- slipkit-run --json inside a slipkit folder ---------------------------------------------
+@pytest.mark.parametrize(
+    "target", ["bundle manifest", "dataset manifest", "inside run"]
+)
+def test_json_summary_never_lands_inside_a_slipkit_folder(
+    bundle: Path,
+    tmp_path: Path,
+    target: str,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """--json over a bundle's, dataset's or run's files is refused before any work; the file is untouched."""
+    from tests.strategies import make_dataset
+
+    from slipkit.data import save_dataset
+
+    dataset = tmp_path / "ds"
+    save_dataset(make_dataset(n_trials=2, n_frames=10, with_events=False), dataset)
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    (run_dir / "run.json").write_text('{"format": "slipkit-run"}\n')
+    path = {
+        "bundle manifest": bundle / "manifest.json",
+        "dataset manifest": dataset / "manifest.json",
+        "inside run": run_dir / "summary.json",
+    }[target]
+    before = path.read_bytes() if path.exists() else None
+    with pytest.raises(SystemExit) as info:
+        main([str(bundle), "--frames", "10", "--json", str(path)])
+    err = capsys.readouterr().err
+    after = path.read_bytes() if path.exists() else None
+    assert (2, True, True, before) == (
+        info.value.code,
+        err.startswith("slipkit-run: error: --json="),
+        "refusing to write into it" in err,
+        after,
+    )
