@@ -139,7 +139,7 @@ def test_train_and_evaluate_end_to_end_on_the_simulated_lift(tmp_path, capsys):
     objective = train_main(cfg)
     run = tmp_path / "run"
     metrics = json.loads((run / "metrics.json").read_text())
-    assert objective == pytest.approx(metrics["accuracy"])
+    assert objective == pytest.approx(metrics["validation"]["balanced_accuracy"])
     assert 0.0 <= metrics["accuracy"] <= 1.0
     assert {"first_frame", "dynamics", "majority"} == set(metrics["controls"])
     assert ["cnn"] == list(metrics["compare"])

@@ -248,7 +248,9 @@ class WindowClassification(Task):
         Non-finite frames (see :func:`~slipkit.features.windows.sliding_windows`).
     """
 
-    objective = "accuracy"
+    #: a validation score on the training side only (the saved model's leave-one-object-out
+    #: selection score, or a group k-fold of the fixed model): what a sweep may optimise
+    objective = "validation.balanced_accuracy"
     direction = "maximize"
 
     def __init__(
@@ -607,7 +609,7 @@ class WindowClassification(Task):
         self.fold_models_: dict[str, list[Any]] = {}
         self._phase_counter = (
             1,
-            2
+            3
             + len(variants)
             + len(self.compare)
             + len(self.sweep)
@@ -677,6 +679,11 @@ class WindowClassification(Task):
             t0 = time.perf_counter()
             fitted = _fit(clone(model), every.X, every.y, every.group)
             self._progress("refit on every trial", 1, 1, t0)
+        else:
+            every = self.windows(
+                dataset.subset(folds[0][0]), width, self.mode, span=self.window_end_s
+            )
+        validation = self._validation(fitted, model, every)
         table.to_csv(out / "test_predictions.csv", index=False)
         vs_time = self._time_outputs(curves, dataset, out)
         if by_width:
@@ -692,6 +699,7 @@ class WindowClassification(Task):
             "balanced_accuracy": main["window"]["balanced_accuracy"],
             "sequence_accuracy": main["sequence"]["accuracy"],
             "selection": self._selection(fitted),
+            "validation": validation,
             "first_frame_accuracy": controls.get("first_frame", {})
             .get("window", {})
             .get("accuracy"),
@@ -745,6 +753,47 @@ class WindowClassification(Task):
             "published": self.published or None,
         }
         return TaskResult(fitted, metrics, self._summary(metrics))
+
+    def _validation(self, fitted: Any, model: Any, train: WindowSet) -> dict[str, Any]:
+        """The saved model's validation score, from its training windows only.
+
+        A search already has it (its chosen candidate's leave-one-object-out mean);
+        a fixed model is scored by a group k-fold (k <= 3) over the same groups.
+        """
+        t0 = time.perf_counter()
+        sel = getattr(fitted, "selection_", None)
+        if sel is not None:
+            best = next(
+                c
+                for c in sel["candidates"]
+                if {"name": c["name"], **c["params"]} == sel["best"]
+            )
+            self._progress("validation (the selection's)", 1, 1, t0)
+            return {
+                "cv": sel["cv"],
+                "scoring": sel["scoring"],
+                sel["scoring"]: sel["best_score"],
+                "std": best["std"],
+                "from": "selection",
+            }
+        from slipkit.train.search import group_cv
+
+        k = min(3, len(np.unique(train.group)))
+        if k < 2:
+            raise SlipkitError(
+                f"the validation CV needs >= 2 values of {self.group!r} (or trials) on "
+                f"the training side; got {k}"
+            )
+        record = group_cv(
+            model,
+            train.X,
+            train.y,
+            train.group,
+            cv=k,
+            unit=self.group if self.split == "group" else "trial",
+        )
+        self._progress("validation", 1, 1, t0)
+        return record
 
     def _selection(self, fitted: Any) -> dict[str, Any] | None:
         """The saved model's selection record, with the per-fold choices beside it.
@@ -865,6 +914,12 @@ class WindowClassification(Task):
             + ", ".join(f"{c} {pct(r).strip()}" for c, r in m["test"]["recall"].items())
             + " (per window)",
         ]
+        val = m.get("validation") or {}
+        if val.get("balanced_accuracy") is not None:
+            lines.append(
+                f"  validation  {pct(val['balanced_accuracy'])}  (balanced, {val['cv']} on the "
+                "training side only: the run's objective)"
+            )
         sel = m.get("selection")
         if sel:
             best = dict(sel["best"])
