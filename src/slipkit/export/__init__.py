@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from slipkit.export import detectors as _detectors  # noqa: F401  (registers exporters)
 from slipkit.export import force as _force  # noqa: F401
+from slipkit.export import generic as _generic  # noqa: F401
 from slipkit.export import sklearn as _sklearn  # noqa: F401
 from slipkit.export import sliptack as _sliptack  # noqa: F401
 from slipkit.export import svm as _svm  # noqa: F401
