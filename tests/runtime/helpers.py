@@ -246,3 +246,55 @@ def run_cli_reporting_modules(
         if line.startswith("import time:") and "imported package" not in line
     ]
     return json.loads(out_json.read_text()), imported
+
+
+#: BioTacSP-DoS's direction classes (slipkit.data.importers.biotacsp_dos.CLASSES).
+DOS_CLASSES = ("n", "e", "s", "w", "cw", "aw", "t")
+
+
+def dos_like_bundle(root: Path, seed: int = 0) -> Path:
+    """A DoS-shaped bundle: 24 electrodes at 100 Hz, windows of 5 every 2 frames, 7-class argmax.
+
+    Slip classes are every direction (all but ``t``); the budget comes from the data's
+    100 Hz (10 ms frame, p99 1 ms), as ``slipkit export`` writes it for DoS.
+    """
+    rng = np.random.default_rng(seed)
+    channels, window = 24, 5
+    man = manifest(
+        window * channels,
+        threshold=None,
+        channels=channels,
+        window=window,
+        hop=2,
+        k=1,
+        budget=(10.0, 1.0),
+        decision={
+            "output": "score",
+            "rule": "argmax",
+            "classes": list(DOS_CLASSES),
+            "positive": "n",
+            "slip_classes": list(DOS_CLASSES[:-1]),
+        },
+    )
+    man["name"] = "dos_like"
+    man["frame"]["streams"] = ["electrodes"]
+    man["budget_ms"]["source"] = "data_rate_hz"
+    man["training"] = {
+        "refit_on_all_data": True,
+        "held_out": False,
+        "scored_on": "4-fold leave-objects-out CV (outer folds), before the refit",
+        "replay": {
+            "trials": 7,
+            "frames": 7 * 60,
+            "held_out": False,
+            "by_class": dict.fromkeys(DOS_CLASSES, 1),
+            "note": "parity and latency, not accuracy",
+        },
+    }
+    x = 2000.0 + np.cumsum(rng.normal(size=(7 * 60, channels)), axis=0)
+    return write_bundle(
+        root / "dos_like",
+        linear_graph(rng.normal(scale=1e-3, size=(window * channels, 7)), 0.0),
+        man,
+        replay=(x, np.arange(len(x)) / RATE_HZ),
+    )

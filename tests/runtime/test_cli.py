@@ -199,3 +199,17 @@ def test_bad_udp_address_exits_2(
         main([str(generous.path), "--udp", "localhost"])
     assert 2 == info.value.code
     assert "--udp: must be HOST:PORT" in capsys.readouterr().err
+
+
+def test_dos_like_bundle_reports_per_class_decisions(tmp_path: Path) -> None:
+    """A 7-class DoS-like bundle: --check passes on its 10 ms frame and counts every class."""
+    from tests.runtime.helpers import DOS_CLASSES, dos_like_bundle
+
+    bundle = dos_like_bundle(tmp_path)
+    out = tmp_path / "s.json"
+    assert 0 == run([str(bundle), "--check", "--json", str(out)])
+    summary = json.loads(out.read_text())
+    by_class = summary["decisions_by_class"]
+    assert list(DOS_CLASSES) == list(by_class)
+    assert summary["decisions"] - by_class["t"] == summary["slip_decisions"]
+    assert {"p99": 1.0, "frame_period": 10.0} == summary["budget_ms"]

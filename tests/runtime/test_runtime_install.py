@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
-from tests.runtime.helpers import pin_bundle, run_cli_reporting_modules
+from tests.runtime.helpers import (
+    DOS_CLASSES,
+    dos_like_bundle,
+    pin_bundle,
+    run_cli_reporting_modules,
+)
 
 from slipkit.runtime.modules import heavy_modules_loaded
 
@@ -54,3 +60,19 @@ def test_runtime_extra_installs_and_runs_without_the_training_stack(
     assert [] == summary["heavy_modules_loaded"]
     assert 0 < summary["decisions"]
     assert (venv / "bin" / "slipkit-run").is_file()
+
+    # A DoS-like multi-class bundle (7 classes, slip = any direction, 10 ms frame).
+    dos = dos_like_bundle(tmp_path / "bundles")
+    done = _run(
+        str(venv / "bin" / "slipkit-run"),
+        str(dos),
+        "--check",
+        "--json",
+        str(tmp_path / "dos.json"),
+    )
+    dos_summary = json.loads((tmp_path / "dos.json").read_text())
+    assert list(DOS_CLASSES) == list(dos_summary["decisions_by_class"])
+    assert (10.0, True) == (
+        dos_summary["budget_ms"]["frame_period"],
+        "check: passed" in done.stdout,
+    )
