@@ -23,6 +23,15 @@ from typing import Any
 import numpy as np
 
 from slipkit.data.dataset import Dataset
+from slipkit.errors import SlipkitError
+
+
+class ObjectiveMissing(SlipkitError, KeyError):
+    """The metrics lack the task's objective (e.g. too few training trials for the
+    validation CV): a one-line CLI error, and a KeyError for callers that probe."""
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return str(self.args[0]) if self.args else ""
 
 
 @dataclass
@@ -79,7 +88,7 @@ class Task(ABC):
         node: Any = metrics
         for key in wanted.split("."):
             if not isinstance(node, Mapping) or key not in node:
-                raise KeyError(
+                raise ObjectiveMissing(
                     f"{type(self).__name__}: objective {wanted!r} not in metrics "
                     f"(keys: {sorted(metrics)})"
                 )

@@ -598,6 +598,8 @@ class StreamDetection(Task):
                 else None
             )
             m_tr, _, _ = self.score(e["detector"], rec_tr)
+            if i == 0 and metrics["validation"]["k"] == 0:
+                metrics["validation"].update(m_tr)
             m_te, table, cv = self.score(e["detector"], rec_te, extra_thresholds=extra)
             block = {
                 "estimator": type(e["detector"]).__name__,
@@ -630,10 +632,14 @@ class StreamDetection(Task):
         ids = np.asarray(train.trial_ids, dtype=object)
         k = min(int(self.cv), len(ids))
         if k < 2:
-            raise SlipkitError(
-                f"validation needs >= 2 training trials; the training half has "
-                f"{len(ids)} (raise the number of trials or lower task.test_size)"
-            )
+            # No CV with one training trial: the caller scores the training trial
+            # itself (its AUCs do not depend on the threshold chosen on it).
+            log.warning("validation: %d training trial(s), no group CV", len(ids))
+            return {
+                "cv": f"none: {len(ids)} training trial(s), scored on the training "
+                "side (AUCs ignore the threshold fitted there; the rest is optimistic)",
+                "k": 0,
+            }
         folds = []
         for j, (a, b) in enumerate(GroupKFold(n_splits=k).split(ids, groups=ids)):
             det = clone(entry["detector"])
