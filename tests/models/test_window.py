@@ -1,4 +1,4 @@
-"""Window classifiers (WindowMLP, WindowCNN): scikit-learn contract, learning, seeds, cost."""
+"""Window classifiers (WindowMLP, WindowCNN, WindowGRU): scikit-learn contract, learning, seeds, cost."""
 
 from __future__ import annotations
 
@@ -11,9 +11,11 @@ from sklearn.utils._param_validation import InvalidParameterError
 from sklearn.utils.estimator_checks import parametrize_with_checks
 
 from slipkit.models.window import (
+    GRUModule,
     MLPModule,
     TemporalCNNModule,
     WindowCNN,
+    WindowGRU,
     WindowMLP,
 )
 
@@ -71,8 +73,9 @@ def two_class_windows(
     [
         WindowMLP(max_epochs=60, lr=0.01),
         WindowCNN(n_channels=3, max_epochs=60, lr=0.01),
+        WindowGRU(n_channels=3, hidden_units=8, max_epochs=60, lr=0.01),
     ],
-    ids=["mlp", "cnn"],
+    ids=["mlp", "cnn", "gru"],
 )
 def test_separates_two_synthetic_classes_of_windows(model):
     """A ramp in one electrode vs none: held-out windows are classified (almost) perfectly."""
@@ -138,3 +141,26 @@ def test_validation_split_keeps_trials_whole_and_early_stopping_keeps_the_best_e
     va = model._valid_split(np.repeat([0, 1], 40), groups, 0)
     assert va is not None
     assert set() == set(groups[va[0]]) & set(groups[va[1]])
+
+
+def test_gru_steps_through_the_frames_from_a_zero_state():
+    """The GRU reads (N, W*C) as W frames of C; its output is the state after the last frame."""
+    torch.manual_seed(0)
+    module = GRUModule(n_channels=3, width=4, n_classes=2, hidden_units=5).eval()
+    x = torch.randn(2, 12)
+    with torch.no_grad():
+        state = torch.zeros(1, 5)
+        for frame in x[0].reshape(4, 3):  # one step per frame, from zero
+            _, h = module.gru(frame.reshape(1, 1, 3), state.reshape(1, 1, 5))
+            state = h.reshape(1, 5)
+        expected = module.head(state)
+        np.testing.assert_allclose(expected.numpy(), module(x)[:1].numpy(), atol=1e-6)
+    # three gates of (3 x 5 + 5 x 5) multiply-adds per frame, 4 frames, head 5 x 2
+    assert 4 * 2 * 3 * (3 * 5 + 5 * 5) + 2 * 5 * 2 == module.flops_per_window()
+
+
+def test_gru_rejects_a_width_that_is_not_whole_frames():
+    """10 inputs are not whole frames of 3 electrodes: the error names n_channels."""
+    X = np.zeros((8, 10))
+    with pytest.raises(ValueError, match="n_channels=3"):
+        WindowGRU(n_channels=3, max_epochs=1).fit(X, [0, 1] * 4)
