@@ -21,6 +21,7 @@ GROUP_PRIMARY = {
     "experiment": "train",
     "deploy": "export",
     "comparison": "compare",
+    "closedloop": "closedloop",
 }
 PRIMARY = sorted(p.stem for p in CONFIGS.glob("*.yaml"))
 GROUP_FILES = sorted(

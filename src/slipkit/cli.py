@@ -53,6 +53,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "slipkit.export.commands:export_main",
         "write an ONNX bundle of a trained run (run=... out=exports/<name>)",
     ),
+    "closedloop": (
+        "slipkit.closedloop.commands:closedloop_main",
+        "closed-loop grasp: slip distance, drops, extra grip per detector bundle (scenario=...)",
+    ),
 }
 
 

@@ -1,0 +1,282 @@
+"""``slipkit closedloop scenario=<family>``: what a detector's accuracy costs a grasp.
+
+Composes ``configs/closedloop.yaml``; the scenario file ``configs/closedloop/<family>.yaml``
+names the scene (plant parameters and sensor effects), the controller and actuator, the
+speeds, the detectors and the runs they come from. For each run the command trains the
+detector with ``slipkit train``'s own function on the family's experiment (once per
+command run, kept under ``<out>/runs/``), exports it with ``slipkit export``'s function
+once per debounce (``<out>/bundles/``), and runs every trial with the bundle deciding
+frame by frame through :class:`slipkit.runtime.StreamLoop`. A zero-delay oracle and a
+no-detector run bound the table; an oracle with a fixed added delay traces the plant's
+own slip-versus-delay curve. The output folder (written atomically) holds
+``results.csv`` (one row per trial), ``summary.csv`` (one row per detector),
+``report.md`` and the headline plot; the report's path is printed last.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import logging
+import math
+import sys
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+from omegaconf import DictConfig, OmegaConf
+
+from slipkit._files import atomic_dir, check_out_path
+from slipkit._options import COUNT, FLAG, SEED, TEXT, check_rules, check_value
+from slipkit.closedloop.detectors import (
+    BundleDetector,
+    Detector,
+    NoDetector,
+    OracleDetector,
+)
+from slipkit.closedloop.report import summarize, write_report
+from slipkit.closedloop.run import run_detector, speed_grid
+from slipkit.closedloop.tactip import check_scenario
+from slipkit.errors import SlipkitError
+from slipkit.train.runs import new_run_dir
+
+log = logging.getLogger("slipkit.closedloop")
+
+OPTIONS = {
+    "scenario": TEXT,
+    "runs_dir": TEXT,
+    "out": TEXT.null(),
+    "overwrite": FLAG,
+    "trials_per_speed": COUNT.null(),
+    "train_trials": COUNT.null(),
+    "warmup": COUNT,
+}
+
+
+def _compose(name: str, overrides: list[str]) -> DictConfig:
+    from hydra import compose
+
+    return compose(config_name=name, overrides=overrides)
+
+
+def load_scenario(cfg: DictConfig) -> DictConfig:
+    """The scenario: ``cfg.closedloop``, or ``configs/closedloop/<cfg.scenario>.yaml`` when
+    ``scenario=`` names another family; the top-level knobs applied."""
+    from slipkit import config_dir
+
+    name = str(cfg.scenario)
+    available = sorted(p.stem for p in (config_dir() / "closedloop").glob("*.yaml"))
+    if name not in available:
+        raise SlipkitError(
+            f"scenario={name}: no closed-loop scenario for it; available: {', '.join(available)}"
+        )
+    node = cfg.get("closedloop")
+    if node is None or str(node.get("name")) != name:
+        node = _compose("closedloop", [f"closedloop={name}"]).closedloop
+    plain = OmegaConf.to_container(node, resolve=True)
+    if not isinstance(plain, dict):
+        raise SlipkitError(f"configs/closedloop/{name}.yaml: expected a mapping")
+    scen = OmegaConf.create(plain)
+    for key in ("trials_per_speed", "train_trials"):
+        if cfg.get(key) is not None:
+            scen[key] = int(cfg[key])
+    return scen
+
+
+def _command(cfg: DictConfig) -> str:
+    from hydra.core.hydra_config import HydraConfig
+
+    if HydraConfig.initialized():
+        return " ".join(["slipkit closedloop", *HydraConfig.get().overrides.task])
+    return str(cfg.get("command") or "slipkit closedloop " + " ".join(sys.argv[1:]))
+
+
+def _quiet(fn: Any, *args: Any) -> tuple[Any, str]:
+    """Call ``fn(*args)`` with its printout captured and ``slipkit.*`` logs off the console."""
+    buf = io.StringIO()
+    logger = logging.getLogger("slipkit")
+    saved = logger.propagate
+    logger.propagate = False
+    try:
+        with contextlib.redirect_stdout(buf):
+            out = fn(*args)
+    finally:
+        logger.propagate = saved
+    return out, buf.getvalue()
+
+
+def train_run(spec: Mapping[str, Any], n_trials: int, seed: int, run_dir: Path) -> Path:
+    """Train one detector with ``slipkit train``'s function: ``experiment=<spec.experiment>``."""
+    from slipkit.train.commands import train_main
+
+    overrides = [
+        f"experiment={spec['experiment']}",
+        f"dataset.n_trials={int(n_trials)}",
+        f"seed={int(seed)}",
+        f"run_dir={run_dir}",
+        *[str(o) for o in spec.get("overrides") or []],
+    ]
+    tcfg = _compose("train", overrides)
+    _, text = _quiet(train_main, tcfg)
+    (run_dir.parent / f"{run_dir.name}.train.log").write_text(text)
+    return run_dir
+
+
+def export_bundle(run: Path, out: Path, debounce_k: int) -> Path:
+    """Export ``run`` with ``slipkit export``'s function, declaring slip after ``debounce_k`` frames."""
+    from slipkit.export.commands import export_main
+
+    ecfg = _compose(
+        "export",
+        [
+            f"run={run}",
+            f"out={out}",
+            f"debounce_k={int(debounce_k)}",
+            "choose_session=false",
+            "replay_max_frames=200",
+            "parity.max_calls=5000",
+        ],
+    )
+    path, text = _quiet(export_main, ecfg)
+    (out.parent / f"{out.name}.export.log").write_text(text)
+    return Path(path)
+
+
+def _run_metrics(run: Path) -> dict[str, float]:
+    """The run's held-out frame accuracy and balanced accuracy (%)."""
+    metrics = json.loads((run / "metrics.json").read_text())
+    test = metrics.get("test", {})
+    return {
+        "accuracy_pct": 100.0 * float(test.get("accuracy", math.nan)),
+        "balanced_accuracy_pct": 100.0 * float(test.get("balanced_accuracy", math.nan)),
+    }
+
+
+def build_detectors(
+    scen: DictConfig, folder: Path, *, warmup: int, seed: int
+) -> tuple[list[Detector], dict[str, dict[str, Any]]]:
+    """Train, export and load every detector of the scenario; the bounds last.
+
+    Returns the detectors and, per name, what the table shows beside the outcomes
+    (kind, debounce, accuracy, budget).
+    """
+    runs: dict[str, Path] = {}
+    info: dict[str, dict[str, Any]] = {}
+    detectors: list[Detector] = []
+    for name, node in (scen.get("detectors") or {}).items():
+        run_name = str(node.run)
+        if run_name not in (scen.get("runs") or {}):
+            raise SlipkitError(
+                f"scenario.detectors.{name}.run={run_name}: not one of scenario.runs "
+                f"({', '.join(map(str, scen.get('runs') or {}))})"
+            )
+        if run_name not in runs:
+            start = time.perf_counter()
+            runs[run_name] = train_run(
+                scen.runs[run_name],
+                int(scen.train_trials),
+                seed,
+                folder / "runs" / run_name,
+            )
+            log.info("trained %s in %.1f s", run_name, time.perf_counter() - start)
+        k = int(node.debounce_k)
+        check_value(f"scenario.detectors.{name}.debounce_k", k, COUNT)
+        bundle = export_bundle(runs[run_name], folder / "bundles" / str(name), k)
+        det = BundleDetector(bundle, str(name), warmup=warmup)
+        detectors.append(det)
+        info[str(name)] = {
+            "kind": "bundle",
+            "run": run_name,
+            "debounce_k": det.debounce_k,
+            "p99_budget_us": det.p99_budget_us,
+            **_run_metrics(runs[run_name]),
+        }
+    detectors.append(OracleDetector("oracle"))
+    info["oracle"] = {"kind": "oracle", "accuracy_pct": 100.0}
+    detectors.append(NoDetector("none"))
+    info["none"] = {"kind": "none"}
+    for delay_ms in scen.get("oracle_delays_ms") or []:
+        name = f"oracle+{float(delay_ms):g}ms"
+        detectors.append(OracleDetector(name, delay_s=float(delay_ms) / 1e3))
+        info[name] = {"kind": "delayed oracle", "added_delay_ms": float(delay_ms)}
+    return detectors, info
+
+
+def run_scenario(
+    cfg: DictConfig, scen: DictConfig, folder: Path
+) -> tuple[pd.DataFrame, pd.DataFrame, dict[str, Any]]:
+    """Every detector over every seed, speed and trial; (results, summary, timings)."""
+    from slipkit.sim.commands import build_scene
+
+    seeds = [int(s) for s in cfg.seeds]
+    for i, s in enumerate(seeds):
+        check_value(f"seeds[{i}]", s, SEED)
+    if not seeds:
+        raise SlipkitError("seeds=[]: list at least one seed")
+    plain = OmegaConf.to_container(scen.plant, resolve=True)
+    if not isinstance(plain, dict):
+        raise SlipkitError("scenario.plant: expected a mapping of plant parameters")
+    plant = {str(k): v for k, v in plain.items()}
+    check_scenario(plant)
+    scene_cfg = _compose("train", [f"scene={scen.scene}"]).scene
+    scene = build_scene(scene_cfg)
+    sp = scen.speeds
+    speeds = speed_grid(float(sp.lo), float(sp.hi), int(sp.n))
+    start = time.perf_counter()
+    detectors, info = build_detectors(
+        scen, folder, warmup=int(cfg.warmup), seed=int(cfg.train_seed)
+    )
+    timings: dict[str, Any] = {"prepare_s": time.perf_counter() - start, "loop_s": {}}
+    rows: list[dict[str, Any]] = []
+    latencies: dict[str, Any] = {}
+    for det in detectors:
+        t0 = time.perf_counter()
+        outcomes = run_detector(
+            scene,
+            det,
+            plant,
+            seeds=seeds,
+            speeds=speeds,
+            trials_per_speed=int(scen.trials_per_speed),
+        )
+        timings["loop_s"][det.name] = time.perf_counter() - t0
+        rows.extend(o.row() for o in outcomes)
+        latencies[det.name] = det.latency_us()
+    results = pd.DataFrame(rows)
+    summary = summarize(results, info, latencies)
+    timings["speeds_mm_s"] = speeds
+    return results, summary, timings
+
+
+def closedloop_main(cfg: DictConfig) -> Path:
+    """Run the scenario ``cfg.scenario``; write the output folder; print its report's path last."""
+    check_rules(cfg, OPTIONS)
+    scen = load_scenario(cfg)
+    out = (
+        Path(str(cfg.out))
+        if cfg.get("out")
+        else new_run_dir(Path(str(cfg.runs_dir)) / "closedloop", str(cfg.scenario))
+    )
+    check_out_path(out, overwrite=bool(cfg.overwrite))
+    start = time.perf_counter()
+    with atomic_dir(out, overwrite=bool(cfg.overwrite)) as tmp:
+        results, summary, timings = run_scenario(cfg, scen, tmp)
+        timings["total_s"] = time.perf_counter() - start
+        results.to_csv(tmp / "results.csv", index=False)
+        summary.to_csv(tmp / "summary.csv", index=False)
+        write_report(
+            tmp,
+            scenario=scen,
+            results=results,
+            summary=summary,
+            timings=timings,
+            command=_command(cfg),
+            seeds=[int(s) for s in cfg.seeds],
+        )
+    report = out / "report.md"
+    print(summary.to_string(index=False))
+    print(report)
+    return report

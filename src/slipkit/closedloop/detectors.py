@@ -1,0 +1,143 @@
+"""What decides slip in the loop: an exported bundle through the runtime loop, or a bound.
+
+* :class:`BundleDetector`: the code that runs on the gripper PC -
+  :func:`slipkit.runtime.load_bundle` and :meth:`slipkit.runtime.StreamLoop.step`, one
+  frame at a time, the bundle's own debounce; the loop's per-decision latency
+  (frame arrival -> decision, ns) is kept for the compute-per-frame columns.
+* :class:`OracleDetector`: reads the plant's true slip state (zero detection delay
+  beyond the frame on which the slip starts): the lower bound.
+* :class:`NoDetector`: never declares: the upper bound (the retraction goes on).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from slipkit.closedloop.plant import PlantState
+
+
+class Detector:
+    """Contract: ``reset()`` per trial, ``decide(state, frame)`` per frame -> declared?
+
+    ``frame`` is a callable that builds the sensor frame of ``state`` (only a detector
+    that reads the sensor pays for it).
+    """
+
+    name: str = "detector"
+    kind: str = "bound"
+
+    def reset(self) -> None:
+        """Start a new trial."""
+
+    def decide(self, state: PlantState, frame: Callable[[], np.ndarray]) -> bool:
+        """Whether slip is declared on this frame."""
+        raise NotImplementedError
+
+    def latency_us(self) -> np.ndarray:
+        """Per-decision compute latencies so far, us (empty for the bounds)."""
+        return np.zeros(0)
+
+
+class OracleDetector(Detector):
+    """Declares slip on the first frame at least ``delay_s`` after the plant's slip onset.
+
+    With ``delay_s = 0`` (the bound) that is the first frame on which the object is
+    sliding; a positive ``delay_s`` traces the plant's slip distance against a known
+    detection delay.
+    """
+
+    def __init__(self, name: str = "oracle", *, delay_s: float = 0.0) -> None:
+        self.name = name
+        self.delay_s = float(delay_s)
+        if not (math.isfinite(self.delay_s) and self.delay_s >= 0):
+            raise ValueError(f"delay_s must be a finite number >= 0 s; got {delay_s!r}")
+
+    def decide(self, state: PlantState, frame: Callable[[], np.ndarray]) -> bool:
+        """True once the plant has slid for ``delay_s``."""
+        del frame
+        onset = state.onset_s
+        # 1e-9 s: a delay of a whole number of frames lands on that frame.
+        return not math.isnan(onset) and state.t - onset >= self.delay_s - 1e-9
+
+
+class NoDetector(Detector):
+    """Never declares slip."""
+
+    def __init__(self, name: str = "none") -> None:
+        self.name = name
+
+    def decide(self, state: PlantState, frame: Callable[[], np.ndarray]) -> bool:
+        """Always False."""
+        del state, frame
+        return False
+
+
+class BundleDetector(Detector):
+    """An exported bundle deciding frame by frame through :class:`~slipkit.runtime.StreamLoop`.
+
+    Parameters
+    ----------
+    bundle_dir : Path
+        A bundle folder (``slipkit export``).
+    name : str
+        Row name in the table.
+    warmup : int
+        Session warm-up calls before the first frame.
+
+    Attributes
+    ----------
+    debounce_k : int
+        The bundle's debounce (consecutive slip decisions).
+    p99_budget_us, frame_period_us : float
+        The sensor's budget from the manifest, us.
+    """
+
+    kind = "bundle"
+
+    def __init__(self, bundle_dir: Path, name: str, *, warmup: int = 20) -> None:
+        from slipkit.runtime import SessionSpec, StreamLoop, load_bundle
+
+        spec = SessionSpec(
+            intra_op_num_threads=1,
+            inter_op_num_threads=1,
+            graph_optimization_level="all",
+            allow_spinning=False,
+            warmup=int(warmup),
+        )
+        self.bundle = load_bundle(bundle_dir, session=spec)
+        self.name = name
+        m = self.bundle.manifest
+        self.debounce_k = int(m.debounce_k)
+        self.p99_budget_us = float(m.budget.p99_ms) * 1e3
+        self.frame_period_us = float(m.budget.frame_period_ms) * 1e3
+        self.loop = StreamLoop(self.bundle)
+        self._lat: list[np.ndarray] = []
+
+    def _collect(self) -> None:
+        lat = self.loop.result().latency_ns
+        if len(lat):
+            self._lat.append(np.asarray(lat, dtype=np.float64) / 1e3)
+
+    def reset(self) -> None:
+        """Keep the finished trial's latencies, then clear the window and the debounce."""
+        self._collect()
+        self.loop.reset()
+
+    def decide(self, state: PlantState, frame: Callable[[], np.ndarray]) -> bool:
+        """Push the frame of ``state`` into the loop; True when the loop declares slip."""
+        values = frame()
+        # The clock starts when the frame exists (the camera delivered it).
+        return self.loop.step(values, state.t, time.perf_counter_ns()) is True
+
+    def latency_us(self) -> np.ndarray:
+        """Every decision's latency so far (this trial's included), us."""
+        self._collect()
+        out = np.concatenate(self._lat) if self._lat else np.zeros(0)
+        self._lat = [out] if len(out) else []
+        self.loop.reset()
+        return out

@@ -1,0 +1,226 @@
+"""TacTip closed loop: the paper's gravity drop with the arm retracting at 0.1-20 mm/s.
+
+James, Pestell, Lepora 2018 (RA-L 3(4), Sec. IV-C, Table II): an object on a vertical
+rail is held against the TacTip by friction; the arm retracts at a constant speed, the
+grip falls until the object slips, and "when slip is detected, the arm moves
+immediately back to prevent the object from falling" (two consecutive slip frames
+trigger the response). Success = the object caught (two plateaus in its height).
+
+Here the plant is :class:`~slipkit.closedloop.plant.GraspPlant` (Hertz contact, the
+scene's mass, friction and stiffness), stepped at the camera rate; the trial's
+parameters are drawn by the scene model itself
+(:meth:`slipkit.sim.scenes.tactip.TacTipGravityDrop.sample` and ``trial``), with the
+retraction speed set from the scenario's grid. Every frame's pins come from the
+plant's *current* state through the scene's listed effects (:class:`TacTipSensor`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+
+from slipkit.closedloop.plant import PlantState
+from slipkit.errors import SlipkitError
+from slipkit.physics.tactip import normal_force_N
+from slipkit.sim.core import (
+    EFFECTS,
+    Scene,
+    SceneState,
+    draw_effect_params,
+    effect_name,
+)
+from slipkit.sim.scenes.tactip import TacTipGravityDrop, TacTipTrial
+
+#: Effects that move the skin as a function of the contact state (grip, load ratio,
+#: time since onset): evaluated per frame on a one-frame state, held at the arrest.
+SKIN_EFFECTS = frozenset({"skin_stretch", "snap_back", "mindlin_creep"})
+#: Effects independent from frame to frame (detection noise, lost pins).
+FRAME_EFFECTS = frozenset({"pin_jitter", "missing_pins", "missing_pin_frames"})
+#: Effects with memory across frames, stepped recursively here.
+RECURSIVE_EFFECTS = frozenset({"slip_sliding"})
+
+
+@dataclass(frozen=True)
+class _TrialAt(TacTipTrial):
+    """The scene's trial seen at one plant state: indentation fixed, onset from the plant.
+
+    The TacTip effects read the contact only through ``indentation(t)`` (and what
+    derives from it: normal force, load ratio, contact weights) and ``onset_s``;
+    with these two replaced, the scene's own effect functions map the closed-loop
+    state to pins.
+    """
+
+    depth_mm: float = 0.0
+
+    def indentation(self, t: np.ndarray) -> np.ndarray:
+        """The plant's indentation at every ``t`` (mm)."""
+        return np.full(np.shape(t), self.depth_mm, dtype=np.float64)
+
+
+def _trial_at(trial: TacTipTrial, depth_mm: float, onset_s: float) -> _TrialAt:
+    values = {f.name: getattr(trial, f.name) for f in fields(TacTipTrial)}
+    values["onset_s"] = onset_s
+    return _TrialAt(**values, depth_mm=float(depth_mm))
+
+
+class TacTipSensor:
+    """Pins of one frame from the plant's state, by the effects the scene lists.
+
+    Reused from the simulator: the scene model's rest layout and radial spreading
+    (the first lines of :meth:`TacTipGravityDrop.base`, repeated in :meth:`base`
+    because ``base`` builds a whole trial), and every listed effect function itself
+    (``slipkit.sim.effects.tactip``), called on a one-frame :class:`SceneState`
+    whose trial is the plant's state (:class:`_TrialAt`). Per-trial draws of effect
+    parameters use :func:`slipkit.sim.core.draw_effect_params`, as ``Scene.run_trial``
+    does. One effect has memory across frames, ``slip_sliding`` (an AR(1) process);
+    it is stepped here with the same law (``x_k = phi x_(k-1) + e_k``,
+    ``phi = exp(-dt / corr_s)``, stationary s.d. ``sigma_mm``, envelope
+    ``1 - exp(-tau / ramp_s)`` times the contact weight) one frame at a time.
+
+    After the arrest the skin re-sticks: the skin effects are held at the arrest's
+    state (assumption: the stuck skin keeps its stretch) and the sliding disorder
+    decays with ``exp(-(t - t_arrest) / ramp_s)`` (assumption).
+
+    Parameters
+    ----------
+    scene : Scene
+        The TacTip scene (model + effects), ``slipkit.sim.commands.build_scene``.
+    trial : TacTipTrial
+        The trial's physical parameters (from the scene model).
+    rng : numpy.random.Generator
+        The trial's generator (effect-parameter draws, then per-frame noise).
+    """
+
+    def __init__(
+        self, scene: Scene, trial: TacTipTrial, rng: np.random.Generator
+    ) -> None:
+        model = scene.model
+        if not isinstance(model, TacTipGravityDrop):
+            raise SlipkitError(
+                f"scenario.scene: the TacTip closed loop needs a TacTip gravity-drop "
+                f"scene; got {type(model).__name__}"
+            )
+        self.model = model
+        self.trial = trial
+        self.rng = rng
+        self.keys = scene.effect_keys()
+        unknown = [
+            k
+            for k in self.keys
+            if effect_name(k) not in SKIN_EFFECTS | FRAME_EFFECTS | RECURSIVE_EFFECTS
+        ]
+        if unknown:
+            raise SlipkitError(
+                f"scenario.scene.effects: {unknown} cannot be evaluated one frame at a "
+                f"time by the closed loop; it knows {sorted(SKIN_EFFECTS | FRAME_EFFECTS | RECURSIVE_EFFECTS)}"
+            )
+        self.params: dict[str, dict[str, Any]] = {}
+        for key in self.keys:
+            kwargs, _ = draw_effect_params(key, scene.effects[key], rng)
+            self.params[key] = kwargs
+        self.dt = 1.0 / model.rate_hz
+        self._ar: np.ndarray | None = None
+
+    def base(self, depth_mm: float) -> np.ndarray:
+        """Rest pins spread radially by the indentation, shape (N, 2), mm."""
+        tr = _trial_at(self.trial, depth_mm, math.inf)
+        w = tr.weights(np.zeros(1))[0]
+        spread = tr.radial_gain * depth_mm / tr.tip_radius_mm * w
+        return self.trial.rest_xy * (1.0 + spread[:, None])
+
+    def _sliding(self, key: str, state: PlantState, weights: np.ndarray) -> np.ndarray:
+        """This frame's ``slip_sliding`` displacement, shape (N, 2), mm."""
+        onset = state.onset_s
+        if math.isnan(onset) or state.t < onset:
+            return np.zeros_like(self.trial.rest_xy)
+        p = self.params[key]
+        sigma, corr, ramp = (
+            float(p.get("sigma_mm", 0.03)),
+            float(p.get("corr_s", 0.02)),
+            float(p.get("ramp_s", 0.03)),
+        )
+        if sigma < 0 or not corr > 0 or not ramp > 0:
+            raise SlipkitError(
+                f"scenario.scene.effects.{key}: need sigma_mm >= 0, corr_s > 0, "
+                f"ramp_s > 0; got {sigma!r}, {corr!r}, {ramp!r}"
+            )
+        phi = math.exp(-self.dt / corr)
+        drive = self.rng.normal(0.0, sigma, size=self.trial.rest_xy.shape)
+        if self._ar is None:
+            self._ar = drive  # stationary from the first frame
+        else:
+            self._ar = phi * self._ar + math.sqrt(1.0 - phi**2) * drive
+        envelope = -math.expm1(-(state.t - onset) / ramp)
+        if not math.isnan(state.arrest_s):
+            envelope *= math.exp(-(state.t - state.arrest_s) / ramp)
+        return self._ar * (envelope * weights)[:, None]
+
+    def frame(self, state: PlantState) -> np.ndarray:
+        """Pins for ``state``: ``x0..x{N-1}, y0..y{N-1}`` (mm, NaN: not detected), shape (2N,)."""
+        arrested = not math.isnan(state.arrest_s)
+        skin_t = state.arrest_s if arrested else state.t
+        skin_depth = self._arrest_depth if arrested else state.indentation_mm
+        if not arrested:
+            self._arrest_depth = state.indentation_mm
+        onset = math.inf if math.isnan(state.onset_s) else state.onset_s
+        now = _trial_at(self.trial, state.indentation_mm, onset)
+        skin = _trial_at(self.trial, skin_depth, onset)
+        pins = self.base(state.indentation_mm)[None]
+        weights = now.weights(np.array([state.t]))[0]
+        for key in self.keys:
+            name = effect_name(key)
+            if name in RECURSIVE_EFFECTS:
+                pins = pins + self._sliding(key, state, weights)[None]
+                continue
+            at_skin = name in SKIN_EFFECTS
+            one = SceneState(
+                time={"pins": np.array([skin_t if at_skin else state.t])},
+                signals={"pins": pins},
+                truth={"tactip": skin if at_skin else now},
+            )
+            pins = np.asarray(
+                EFFECTS[name](one, self.rng, **self.params[key]).signals["pins"]
+            )
+        return np.concatenate([pins[0, :, 0], pins[0, :, 1]])
+
+    _arrest_depth: float = 0.0
+
+
+def open_loop_force(trial: TacTipTrial, t: float) -> float:
+    """Grip force the retraction alone would give at ``t`` (no response), N."""
+    depth = float(trial.indentation(np.array([t]))[0])
+    return float(normal_force_N(np.asarray(depth), trial.stiffness))
+
+
+def draw_trial(
+    model: TacTipGravityDrop,
+    rng: np.random.Generator,
+    *,
+    speed_mm_s: float,
+    onset_s: tuple[float, float],
+) -> tuple[dict[str, Any], TacTipTrial]:
+    """One trial's parameters (the scene model's draw, speed from the grid) and physics."""
+    params = model.sample(rng)
+    params["speed_mm_s"] = float(speed_mm_s)
+    params["onset_s"] = float(rng.uniform(*onset_s))
+    return params, model.trial(params)
+
+
+def check_scenario(plant: Mapping[str, Any]) -> None:
+    """Refuse plant parameters that cannot run (names the field)."""
+    for key in ("latency_s", "tau_s"):
+        value = plant.get(key)
+        if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
+            raise SlipkitError(
+                f"scenario.plant.{key}: expected a finite number >= 0 s; got {value!r}"
+            )
+    for key in ("catch_mm_s", "catch_indentation_mm", "travel_mm", "post_s"):
+        value = plant.get(key)
+        if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+            raise SlipkitError(
+                f"scenario.plant.{key}: expected a finite number > 0; got {value!r}"
+            )
