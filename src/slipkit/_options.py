@@ -22,7 +22,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig, ListConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from slipkit.errors import SlipkitError
@@ -119,6 +119,14 @@ TEXT = Rule(
 )
 PATH = Rule("a path", TEXT.accept, required=True)
 RATE = number(positive=True)
+SEEDS = Rule(
+    f"a non-empty list of whole numbers in [0, {MAX_SEED}]",
+    lambda v: (
+        isinstance(v, ListConfig | list | tuple)
+        and len(v) > 0
+        and all(SEED.accept(x) for x in v)
+    ),
+)
 
 #: subcommand -> dotted option -> rule. Options not listed are not checked here (the
 #: code that reads them refuses bad values with a SlipkitError of its own).
@@ -168,6 +176,17 @@ OPTIONS: dict[str, dict[str, Rule]] = {
         "cost.max_frames": COUNT,
         "cost.warmup": whole(0),
         "cost.keep_bundles": FLAG,
+    },
+    "closedloop": {
+        "scenario": TEXT,
+        "seeds": SEEDS,
+        "train_seed": SEED,
+        "trials_per_speed": COUNT.null(),
+        "train_trials": COUNT.null(),
+        "warmup": whole(0),
+        "runs_dir": TEXT,
+        "out": TEXT.null(),
+        "overwrite": FLAG,
     },
     "demo": {
         "out": PATH,

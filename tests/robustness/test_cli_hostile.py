@@ -204,6 +204,31 @@ MALFORMED: list[tuple[list[str], str]] = [
         "comparison.estimators.fsr_paper: The 'threshold' parameter of FSRTouchSlip "
         "must be an instance of 'float' or None. Got 'abc' instead.",
     ),
+    # closedloop
+    (
+        ["closedloop", "out={tmp}/cl", "seeds=[0,1.5]"],
+        "seeds=[0, 1.5]: expected a non-empty list of whole numbers in [0, 4294967295]",
+    ),
+    (
+        ["closedloop", "out={tmp}/cl", "seeds=3"],
+        "seeds=3: expected a non-empty list of whole numbers in [0, 4294967295]",
+    ),
+    (
+        ["closedloop", "out={tmp}/cl", "trials_per_speed=0"],
+        "trials_per_speed=0: expected a whole number >= 1 or null",
+    ),
+    (
+        ["closedloop", "out={tmp}/cl", "train_trials=2.5"],
+        "train_trials=2.5: expected a whole number >= 1 or null",
+    ),
+    (
+        ["closedloop", "out={tmp}/cl", "overwrite=yes"],
+        "overwrite=yes: expected true or false",
+    ),
+    (
+        ["closedloop", "closedloop=nope"],
+        "Could not find 'closedloop/nope'; available: ",
+    ),
     # demo (out= under tmp_path even though nothing may be written)
     (["demo", "out={tmp}/demo", "quick=maybe"], "quick=maybe: expected true or false"),
     (
@@ -219,8 +244,7 @@ MALFORMED: list[tuple[list[str], str]] = [
 
 @pytest.mark.parametrize(
     ("args", "message"),
-    MALFORMED,
-    ids=lambda v: " ".join(v) if isinstance(v, list) else "",
+    [pytest.param(*case, id=" ".join(case[0])) for case in MALFORMED],
 )
 def test_malformed_options_end_in_one_line(
     args: list[str],
@@ -510,8 +534,22 @@ def no_training(monkeypatch: pytest.MonkeyPatch) -> list[Any]:
             "comparison 'sliptack': estimator 'fsr' (FSRTouchSlip) cannot run in this "
             "family's task: SlipTackSpeed runs the SlipTack speed estimator",
         ),
+        (
+            [
+                "comparison=biotac_slip_type",
+                "comparison.estimators.window_cnn.n_channels=24",
+            ],
+            "comparison 'biotac_slip_type': estimator 'window_cnn': n_channels=24, but "
+            "stream 'electrodes' of the family's data has 19 channel(s)",
+        ),
     ],
-    ids=["dos-real-pressure", "fsr-window-mlp", "fsr-pressure-rate", "sliptack-fsr"],
+    ids=[
+        "dos-real-pressure",
+        "fsr-window-mlp",
+        "fsr-pressure-rate",
+        "sliptack-fsr",
+        "cnn-channels",
+    ],
 )
 def test_compare_refuses_an_estimator_before_any_training(
     args: list[str],
