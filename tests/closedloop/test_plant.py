@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from slipkit.closedloop.plant import (
@@ -126,3 +127,13 @@ def test_plant_refuses_kinetic_above_static_friction() -> None:
     """mu_k > mu_s is refused, naming the field."""
     with pytest.raises(SlipkitError, match="mu_k"):
         _plant(mu_k=1.5)
+
+
+def test_plant_force_is_the_scene_hertz_law() -> None:
+    """The plant's grip force equals slipkit.physics.tactip.normal_force_N (the scene's law)."""
+    from slipkit.physics.tactip import normal_force_N
+
+    plant = _plant()
+    depths = [0.0, 0.3, 1.7, 3.0, 5.0]
+    expected = [float(normal_force_N(np.asarray(d), 0.5)) for d in depths]
+    assert expected == pytest.approx([plant.force(d) for d in depths], rel=1e-12)

@@ -221,7 +221,14 @@ def headline_plot(summary: pd.DataFrame, path: Path, *, title: str) -> Path:
     for b in budgets:
         ax2.axvline(float(b), color="r", linestyle="--", label=f"p99 budget {b:.0f} us")
     if len(bundles):
+        from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
+
         ax2.set_xscale("log")
+        # Major ticks only at 1-2-5 decades, labelled plainly; unlabelled minor ticks
+        # (labelled ones overlap on a span of less than a decade).
+        ax2.xaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+        ax2.xaxis.set_major_formatter(ScalarFormatter())
+        ax2.xaxis.set_minor_formatter(NullFormatter())
         ax2.legend(fontsize=8, loc="upper left")
     ax2.set_xlabel("compute per frame, p99 of the runtime loop (us)")
     ax2.set_ylabel("slip distance at arrest (mm)")
@@ -247,7 +254,8 @@ def write_report(
     png = headline_plot(
         summary,
         folder / f"closedloop_{name}.png",
-        title=f"{name}: closed-loop slip ({len(seeds)} seeds, mean +- std)",
+        title=f"{name}: closed-loop slip ({len(seeds)} seed{'s' if len(seeds) > 1 else ''}, "
+        "mean +- std over seeds)",
     )
     bundles = [str(d) for d in summary.loc[summary["kind"] == "bundle", "detector"]]
     speeds = per_speed(results, [*bundles, "oracle"])

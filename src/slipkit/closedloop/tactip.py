@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -59,6 +60,16 @@ class _TrialAt(TacTipTrial):
     def indentation(self, t: np.ndarray) -> np.ndarray:
         """The plant's indentation at every ``t`` (mm)."""
         return np.full(np.shape(t), self.depth_mm, dtype=np.float64)
+
+    @cached_property
+    def _weights(self) -> np.ndarray:
+        # The indentation is fixed, so the contact weights are the same at every t:
+        # computed once per state instead of once per effect (the loop's hot spot).
+        return TacTipTrial.weights(self, np.zeros(1))[0]
+
+    def weights(self, t: np.ndarray) -> np.ndarray:
+        """Contact weight of every pin at every ``t``, shape (T, N) (the scene's, cached)."""
+        return np.broadcast_to(self._weights, (np.size(t), len(self._weights)))
 
 
 def _trial_at(trial: TacTipTrial, depth_mm: float, onset_s: float) -> _TrialAt:
@@ -168,9 +179,10 @@ class TacTipSensor:
             self._arrest_depth = state.indentation_mm
         onset = math.inf if math.isnan(state.onset_s) else state.onset_s
         now = _trial_at(self.trial, state.indentation_mm, onset)
-        skin = _trial_at(self.trial, skin_depth, onset)
-        pins = self.base(state.indentation_mm)[None]
-        weights = now.weights(np.array([state.t]))[0]
+        skin = now if not arrested else _trial_at(self.trial, skin_depth, onset)
+        weights = now.weights(np.zeros(1))[0]
+        spread = now.radial_gain * state.indentation_mm / now.tip_radius_mm * weights
+        pins = (self.trial.rest_xy * (1.0 + spread[:, None]))[None]
         for key in self.keys:
             name = effect_name(key)
             if name in RECURSIVE_EFFECTS:
