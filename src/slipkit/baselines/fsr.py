@@ -34,8 +34,9 @@ of the rest period (all of them missing: no touch is ever seen).
 *fall* as the force rises; the other common wiring makes it *rise*. ``polarity`` says
 which (``"falling"``, ``"rising"``) or, with ``"auto"`` (the default), ``fit`` learns it
 from the training recordings: every recording's samples that leave its rest mean by more
-than ``delta`` vote for the direction they moved (a press), and the recordings must
-agree. Training data in which no recording is ever pressed is refused
+than ``delta`` vote for the direction they moved (a press); recordings of both wirings
+give ``"per_recording"`` (each recording's first block further than ``delta`` from its
+rest sets its direction) with a :class:`PolarityWarning`. Training data in which no recording is ever pressed is refused
 (:class:`~slipkit.errors.SlipkitError` naming the data), also with a fixed threshold:
 with an unknown polarity the detector would otherwise look at the wrong sign and
 silently never fire. Slip is the opposite of a press: a voltage moving back towards
@@ -118,10 +119,13 @@ class FSRTouchSlip(StreamDetector):
     calibration : sequence of 5 floats or None
         ``p1..p5`` of eq. 6 (N from V) for ``input="force"``; None: the default
         :data:`slipkit.physics.fsr.DEFAULT_CALIBRATION`.
-    polarity : {"auto", "falling", "rising"}
+    polarity : {"auto", "falling", "rising", "per_recording"}
         How the conditioned voltage moves when the FSR is pressed: ``"falling"`` (the
-        paper's divider), ``"rising"`` (the other common wiring), or ``"auto"``: learned
-        by ``fit`` from the training recordings (which must include a press).
+        paper's divider), ``"rising"`` (the other common wiring), ``"per_recording"``
+        (each recording's first press sets its direction; voltage input, no ONNX
+        graph), or ``"auto"``: learned by ``fit`` from the training recordings (which
+        must include a press; recordings of both wirings give ``"per_recording"`` and a
+        :class:`PolarityWarning`).
     confirm_events : int
         Separate derivative peaks of at least ``alpha`` needed within
         ``confirm_window_s`` to declare slip; 1 is the paper's detector (one block).
@@ -143,7 +147,7 @@ class FSRTouchSlip(StreamDetector):
         ``alpha`` (V/s, or N/s for force input).
     delta_ : float
         The touch threshold used (V or N).
-    polarity_ : {"falling", "rising"}
+    polarity_ : {"falling", "rising", "per_recording"}
         The voltage direction under a press (given, or learned in ``fit``).
     polarity_votes_ : dict
         Training recordings whose press fell / rose / that were never pressed
@@ -357,7 +361,8 @@ class FSRTouchSlip(StreamDetector):
 
         See :meth:`StreamDetector.fit <slipkit.baselines.base.StreamDetector.fit>`.
         Raises :class:`~slipkit.errors.SlipkitError` when ``polarity="auto"`` and no
-        training recording is ever pressed, or the recordings disagree.
+        training recording is ever pressed; warns (:class:`PolarityWarning`) and uses
+        ``"per_recording"`` when the recordings disagree.
         """
         self._validate_params()
         Xv = self._check_X(X, reset=True)
