@@ -566,4 +566,10 @@ class FSRStream:
         return sorted(v for _, v in self._peaks)[-self._need]
 
 
-__all__ = ["DEFAULT_DELTA", "FSRStream", "FSRTouchSlip"]
+__all__ = [
+    "DEFAULT_DELTA",
+    "PRESS_DIRECTION",
+    "FSRStream",
+    "FSRTouchSlip",
+    "PolarityWarning",
+]

@@ -1089,10 +1089,15 @@ class _BandStream:
 
 __all__ = [
     "PAPER_F_MAX",
+    "SPEED_PER_FORCE",
     "DropAcceleration",
+    "FixedNormalForceWarning",
     "StickSlipSpeed",
     "TorsionalSlipDetector",
     "dominant_frequency",
     "f_max_values",
+    "harmonic_mask",
+    "harmonic_relation",
+    "parabolic_offset",
     "speed_from_frequency",
 ]
