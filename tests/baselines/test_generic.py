@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from slipkit.baselines.generic import ChannelChangeDetector, WindowClassifierDetector
+from slipkit.baselines.generic import ChannelChangeDetector
 from slipkit.export import export
 from slipkit.export.detectors import DetectorGraph, check_detector_parity
+from slipkit.models.window_detector import WindowClassifierDetector
 
 
 def recording(seed: int, *, n: int = 200, onset: int = 120, sign: float = -1.0):

@@ -11,11 +11,11 @@ detector (``slipkit export run=...``).
   constant ``MatMul`` over the window (in float64), ``Abs`` or the learned signs,
   the RMS for ``energy``, the per-channel scales, ``ReduceMax`` / ``ReduceSum``;
   ``NO_SCORE`` where a difference the score reads is not finite (as the batch form).
-* :class:`~slipkit.baselines.generic.WindowClassifierDetector`: the fitted Pipeline
+* :class:`~slipkit.models.window_detector.WindowClassifierDetector`: the fitted Pipeline
   converted by skl2onnx (:func:`slipkit.export.sklearn.export_sklearn`, with
   slipkit's converter for the window statistics), a ``Reshape`` in front (the window
   flattened time-major, as the detector's windows) and the slip probability column
-  behind; ``NO_SCORE`` for a window holding a non-finite sample.
+  behind, clipped as the detector clips it; ``NO_SCORE`` for a window holding a non-finite sample.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ import numpy as np
 from onnx import helper
 from sklearn.utils.validation import check_is_fitted
 
-from slipkit.baselines.generic import ChannelChangeDetector, WindowClassifierDetector
+from slipkit.baselines.generic import ChannelChangeDetector
 from slipkit.export import window_stats as _window_stats  # noqa: F401  (converter)
 from slipkit.export._graph import FLOAT, GraphBuilder
 from slipkit.export.detectors import (
@@ -42,6 +42,7 @@ from slipkit.export.registry import (
     register_exporter,
 )
 from slipkit.export.sklearn import export_sklearn
+from slipkit.models.window_detector import PROB_CLIP, WindowClassifierDetector
 
 
 def _not_finite(g: GraphBuilder, v: str) -> str:
@@ -64,11 +65,8 @@ def export_channel_change(
     hi = g.op("Gather", x, g.const(ends, np.int64), axis=1)
     lo = g.op("Gather", x, g.const(ends - s, np.int64), axis=1)
     d = g.op(
-        "Mul",
-        g.op("Sub", hi, lo),
-        g.const(float(detector.rate_hz) / s, np.float64),
-        stem="deriv",
-    )  # (batch, m, C), as the batch (x[t] - x[t - s]) * rate / s
+        "Div", g.op("Sub", hi, lo), g.const(float(s), np.float64), stem="deriv"
+    )  # (batch, m, C), as the batch (x[t] - x[t - s]) / s
     bad = _not_finite(
         g, g.op("ReduceSum", d, g.const([1, 2], np.int64), keepdims=0)
     )  # (batch,)
@@ -156,6 +154,10 @@ def export_window_classifier(
             helper.make_tensor(names["one"], helper.TensorProto.INT64, [], [1]),
             helper.make_tensor(names["no"], helper.TensorProto.FLOAT, [], [NO_SCORE]),
             helper.make_tensor(names["neg"], helper.TensorProto.INT64, [1], [-1]),
+            helper.make_tensor("clip_lo", helper.TensorProto.FLOAT, [], [PROB_CLIP]),
+            helper.make_tensor(
+                "clip_hi", helper.TensorProto.FLOAT, [], [1.0 - PROB_CLIP]
+            ),
             helper.make_tensor("window_axes", helper.TensorProto.INT64, [2], [1, 2]),
         ]
     )
@@ -164,7 +166,10 @@ def export_window_classifier(
             helper.make_node(
                 "Gather", [inner.score_output, names["one"]], [names["col"]], axis=1
             ),
-            helper.make_node("Reshape", [names["col"], names["neg"]], [names["flat"]]),
+            helper.make_node("Reshape", [names["col"], names["neg"]], ["slip_raw"]),
+            helper.make_node(
+                "Clip", ["slip_raw", "clip_lo", "clip_hi"], [names["flat"]]
+            ),
             helper.make_node(
                 "ReduceSum", [WINDOW_INPUT, "window_axes"], [names["sum"]], keepdims=0
             ),
