@@ -20,9 +20,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
 
 from slipkit.baselines.fsr import FSRTouchSlip, PolarityWarning
-from slipkit.baselines.sliptack import FixedNormalForceWarning, StickSlipSpeed
+from slipkit.baselines.sliptack import (
+    FixedNormalForceWarning,
+    StickSlipSpeed,
+    parabolic_offset,
+)
 from slipkit.errors import SlipkitError
 
 RATE = 2000.0  # Hz
@@ -537,3 +544,39 @@ def test_speed_task_with_per_trial_forces(
         assert err > 5.0
     else:
         assert err <= bound
+
+
+# -- edge cases (Hypothesis) --------------------------------------------------------------------
+@settings(max_examples=40, deadline=None)
+@given(
+    steps=arrays(np.float64, st.integers(0, 400), elements=st.floats(-0.05, 0.05)),
+    nan_at=st.lists(st.integers(0, 399), max_size=5),
+    k=st.integers(1, 3),
+    polarity=st.sampled_from(["falling", "rising", "per_recording"]),
+)
+def test_confirmed_and_per_recording_batch_equals_stream_on_any_signal(
+    steps: np.ndarray, nan_at: list[int], k: int, polarity: str
+) -> None:
+    """Random walks with NaN samples: batch scores equal the streaming replay for every rule."""
+    v = np.r_[np.full(10, 4.5), 4.5 + np.cumsum(steps) * 20.0][:, None]
+    v[[i for i in nan_at if i < len(v)]] = np.nan
+    det = FSRTouchSlip(
+        threshold=1.0,
+        polarity=polarity,
+        confirm_events=k,
+        confirm_window_s=0.02,
+        peak_gap_s=0.005,
+    ).fit(np.full((20, 1), 4.5), np.zeros(20, int))
+    scores, dec = det.replay(v)
+    batch = det.decision_function(v)
+    np.testing.assert_array_equal(batch, scores)
+    assert (batch >= 1.0).tolist() == dec.tolist()
+
+
+@settings(max_examples=60, deadline=None)
+@given(mag=arrays(np.float64, st.integers(3, 30), elements=st.floats(0.0, 1e6)))
+def test_parabolic_offset_is_bounded_and_finite(mag: np.ndarray) -> None:
+    """Zeros, flats and huge magnitudes: every offset is finite and within half a bin."""
+    off = parabolic_offset(mag, np.arange(1, len(mag) - 1))
+    assert np.isfinite(off).all()
+    assert np.abs(off).max(initial=0.0) <= 0.5
