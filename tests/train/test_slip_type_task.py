@@ -21,6 +21,7 @@ import slipkit
 from slipkit.compare.adapters import _window_controls
 from slipkit.compare.report import CONTROLS, markdown_table
 from slipkit.data import save_dataset
+from slipkit.demo import _controls_section
 from slipkit.errors import SlipkitError
 from slipkit.models.selection import CandidateSearch
 from slipkit.models.window import WindowMLP
@@ -160,6 +161,8 @@ def test_train_and_evaluate_end_to_end_on_the_simulated_lift(tmp_path, capsys):
     assert metrics["sequence"]["balanced_accuracy"] == row["sequence_balanced_accuracy"]
     table = markdown_table(pd.DataFrame([{"estimator": "mlp", **row}]), CONTROLS)
     assert "| estimator | sequence acc | sequence bal. | first frame only |" in table
+    demo = _controls_section({"biotac_slip_type": {"estimator": "mlp", **row}})
+    assert "| biotac_slip_type | `mlp` | " in "\n".join(demo)
 
     with initialize_config_dir(
         config_dir=str(slipkit.config_dir()), version_base="1.3"
