@@ -114,3 +114,15 @@ def test_sensor_frame_is_still_before_onset_and_moves_at_onset() -> None:
         bool(np.allclose(a, b)),
         bool(np.abs(c - b).max() > 0.01),
     )
+
+
+@pytest.mark.slow
+def test_default_scenario_meets_the_paper_catch_rate(tmp_path: Path) -> None:
+    """The default run (3 seeds, 24 training trials) catches >= 95 % with k = 2 and keeps the order."""
+    summary = _run(tmp_path, [])
+    slip = [float(summary.loc[f"svm_k{k}", "slip_mm"]) for k in range(1, 5)]
+    assert (True, True, True) == (
+        bool(summary.loc["svm_k2", "caught_pct"] >= 95.0),
+        all(a <= b for a, b in itertools.pairwise(slip)),
+        float(summary.loc["oracle", "slip_mm"]) <= min(slip),
+    )
