@@ -113,6 +113,8 @@ class PinMotionDetector(StreamDetector):
         "consecutive": [Interval(Integral, 1, None, closed="left")],
     }
     n_channels: ClassVar[int | None] = None  # 2 N: x block, y block
+    #: any pin count is scored (``slipkit evaluate`` lets another pin layout through)
+    pin_count_independent: ClassVar[bool] = True
 
     def __init__(
         self,

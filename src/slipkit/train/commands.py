@@ -372,7 +372,12 @@ def check_fits_run(run: Any, dataset: Any, where: Path) -> None:
                     f"(task.channels), which this dataset lacks; its channels: "
                     f"{_preview(have)}"
                 )
-        elif want and want != have:
+        elif (
+            want
+            and want != have
+            # pooled TacTip models read any pin count (slipkit.baselines.tactip)
+            and not getattr(run.model, "pin_count_independent", False)
+        ):
             raise SlipkitError(
                 f"{what}: stream {name!r} has {len(have)} channels {_preview(have)}, "
                 f"the run was {origin} with {len(want)} {_preview(want)}"
