@@ -130,3 +130,15 @@ def test_search_errors_name_the_problem():
         CandidateSearch(
             candidates={"d": DummyClassifier()}, grids={"x": {"C": [1]}}, verbose=False
         ).fit(X, y, groups=g)
+
+
+def test_parallel_inner_folds_give_the_same_record():
+    """n_jobs=2 scores the same folds as the serial loop: identical candidates and choice."""
+    X, y, g = grouped_problem(seed=1)
+    kw = {
+        "candidates": {"majority": DummyClassifier(), "lr": LogisticRegression()},
+        "verbose": False,
+    }
+    serial = CandidateSearch(**kw).fit(X, y, groups=g)
+    parallel = CandidateSearch(**kw, n_jobs=2).fit(X, y, groups=g)
+    assert serial.selection_ == parallel.selection_

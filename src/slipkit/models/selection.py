@@ -34,6 +34,7 @@ from sklearn.base import BaseEstimator, ClassifierMixin, clone
 from sklearn.metrics import get_scorer
 from sklearn.model_selection import GroupKFold, LeaveOneGroupOut, ParameterGrid
 from sklearn.utils._param_validation import Interval, StrOptions
+from sklearn.utils.parallel import Parallel, delayed
 from sklearn.utils.validation import check_is_fitted
 
 __all__ = ["CandidateSearch", "fit_with_groups"]
@@ -57,6 +58,21 @@ def _plain(value: Any) -> Any:
     return repr(value)
 
 
+def _fold_score(
+    base: Any,
+    X: NDArray[Any],
+    y: NDArray[Any],
+    g: NDArray[Any],
+    tr: NDArray[np.intp],
+    va: NDArray[np.intp],
+    scorer: Any,
+) -> float:
+    """Fit a clone of ``base`` on rows ``tr``, score it on rows ``va``."""
+    est = clone(base)
+    fit_with_groups(est, X[tr], y[tr], g[tr])
+    return float(scorer(est, X[va], y[va]))
+
+
 class CandidateSearch(ClassifierMixin, BaseEstimator):
     """The best of several candidate classifiers by group-aware cross-validation.
 
@@ -78,6 +94,10 @@ class CandidateSearch(ClassifierMixin, BaseEstimator):
         of a trial overlap, so thinning loses little); the refit uses all rows.
     verbose : bool
         A tqdm progress bar on stderr (candidate, fold, elapsed, ETA).
+    n_jobs : int or None
+        Inner folds of one candidate fitted in parallel (joblib processes); None or
+        1 fits them one after the other (the bar then moves per fold, else per
+        candidate).
 
     Attributes
     ----------
@@ -109,6 +129,7 @@ class CandidateSearch(ClassifierMixin, BaseEstimator):
         "scoring": [str],
         "subsample": [Interval(Integral, 1, None, closed="left")],
         "verbose": ["boolean"],
+        "n_jobs": [Interval(Integral, 1, None, closed="left"), None],
     }
 
     def __init__(
@@ -120,6 +141,7 @@ class CandidateSearch(ClassifierMixin, BaseEstimator):
         scoring: str = "balanced_accuracy",
         subsample: int = 1,
         verbose: bool = True,
+        n_jobs: int | None = None,
     ) -> None:
         self.candidates = candidates
         self.grids = grids
@@ -127,6 +149,7 @@ class CandidateSearch(ClassifierMixin, BaseEstimator):
         self.scoring = scoring
         self.subsample = subsample
         self.verbose = verbose
+        self.n_jobs = n_jobs
 
     def _pairs(self) -> list[tuple[str, dict[str, Any]]]:
         grids = dict(self.grids or {})
@@ -191,17 +214,30 @@ class CandidateSearch(ClassifierMixin, BaseEstimator):
         results: list[dict[str, Any]] = []
         try:
             for j, (name, params) in enumerate(pairs, 1):
-                scores = []
                 t0 = time.perf_counter()
-                for i, (tr, va) in enumerate(splits, 1):
+                base = clone(self.candidates[name]).set_params(**params)
+                if self.n_jobs is not None and self.n_jobs > 1:
                     bar.set_postfix_str(
-                        f"candidate {j}/{len(pairs)} {name}, fold {i}/{len(splits)}",
+                        f"candidate {j}/{len(pairs)} {name}, {len(splits)} folds "
+                        f"in {self.n_jobs} jobs",
                         refresh=False,
                     )
-                    est = clone(self.candidates[name]).set_params(**params)
-                    fit_with_groups(est, X[rows[tr]], y[rows[tr]], g[rows[tr]])
-                    scores.append(float(scorer(est, X[rows[va]], y[rows[va]])))
-                    bar.update(1)
+                    scores = Parallel(n_jobs=self.n_jobs)(
+                        delayed(_fold_score)(base, X, y, g, rows[tr], rows[va], scorer)
+                        for tr, va in splits
+                    )
+                    bar.update(len(splits))
+                else:
+                    scores = []
+                    for i, (tr, va) in enumerate(splits, 1):
+                        bar.set_postfix_str(
+                            f"candidate {j}/{len(pairs)} {name}, fold {i}/{len(splits)}",
+                            refresh=False,
+                        )
+                        scores.append(
+                            _fold_score(base, X, y, g, rows[tr], rows[va], scorer)
+                        )
+                        bar.update(1)
                 results.append(
                     {
                         "name": name,
