@@ -105,3 +105,38 @@ def test_pooled_features_are_rotation_invariant(
     a = pooled_features(np.hstack([dr, theta]))
     b = pooled_features(np.hstack([dr, theta + angle]))
     np.testing.assert_allclose(b, a, atol=1e-9)
+
+
+def _simulate(scene: str, n: int, seed: int):
+    from hydra import compose, initialize_config_dir
+
+    from slipkit import config_dir
+    from slipkit.sim.commands import build_scene
+
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        cfg = compose(config_name="simulate", overrides=[f"scene={scene}"])
+    return build_scene(cfg.scene).simulate(n, seed=seed)
+
+
+def test_fitted_on_the_127_pin_hard_scene_it_detects_331_pin_slips_on_time() -> None:
+    """Threshold from the 127-pin hard scene's event ROC; on 331 pins at 60 FPS every slip
+    fires within 2 frames of its onset velocity frame and no trial fires before it."""
+    from slipkit.train.tasks.detection import StreamDetection
+
+    task = StreamDetection(stream="pins", roc_unit="event", negative_window_s=0.05)
+    det = PinMotionDetector()
+    task._fit_one(
+        det, task.recordings(_simulate("tactip_gravity_drop_hard", 10, 0), "pins", None)
+    )
+    rec = task.recordings(
+        _simulate("tactip_gravity_drop_hard_331", 10, 1), "pins", None
+    )
+    pred = det.predict(rec.X, segments=rec.segments) > 0
+    delays = []
+    for k, (a, b) in enumerate(rec.bounds()):
+        onset_frame = int(np.searchsorted(rec.t[a:b], rec.onset_s[k])) - 1
+        first = int(
+            np.flatnonzero(pred[a + 1 : b])[0]
+        )  # sample j + 1 ends velocity frame j
+        delays.append(first - onset_frame)
+    assert [True] * 10 == [0 <= d <= 2 for d in delays]
