@@ -88,7 +88,19 @@ def one_line(text: str) -> str:
     return "; ".join([*head, *parts[-1:]]) or "(no message)"
 
 
+def _close_progress_bars() -> None:
+    """End any live tqdm bar, so the message starts on its own line, not after a bar."""
+    tqdm_module = sys.modules.get("tqdm")
+    bars = getattr(getattr(tqdm_module, "tqdm", None), "_instances", None) or ()
+    for bar in list(bars):
+        with contextlib.suppress(
+            Exception
+        ):  # a bar that cannot close must not hide the error
+            bar.close()
+
+
 def _fail(sub: str, message: str, status: int) -> NoReturn:
+    _close_progress_bars()
     print(f"slipkit {sub}: {one_line(message)}", file=sys.stderr)
     raise SystemExit(status)
 

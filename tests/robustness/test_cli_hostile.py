@@ -88,6 +88,10 @@ MALFORMED: list[tuple[list[str], str]] = [
         ["simulate", "scene=biotac_lift_slip", "scene.model.pac_rate_hz=nan"],
         "scene.model.pac_rate_hz=nan: expected a finite number > 0",
     ),
+    (
+        ["simulate", "scene.effects.white_noise.sigma=abc", "out={tmp}/s"],
+        "scene.effects.white_noise.sigma: expected a finite number or [lo, hi]; got 'abc'",
+    ),
     (["simulate", "overwrite=yes"], "overwrite=yes: expected true or false"),
     (["simulate", "progress=2"], "progress=2: expected true or false"),
     (["simulate", "out=${nope}"], "out: Interpolation key 'nope' not found"),
@@ -163,6 +167,10 @@ MALFORMED: list[tuple[list[str], str]] = [
     (
         ["train", "dataset.n_trials=4", "task.test_size=abc", "run_dir={tmp}/run"],
         "test_size must be a number in [0, 1); got 'abc'",
+    ),
+    (
+        ["train", "task.variant=nope", "run_dir={tmp}/run"],
+        "task.variant=nope: expected one of dr_dtheta, dr, dtheta",
     ),
     # evaluate
     (["evaluate"], "run=...: missing; this option is required"),

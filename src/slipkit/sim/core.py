@@ -135,6 +135,25 @@ def _is_list(value: Any) -> bool:
     return isinstance(value, Sequence) and not isinstance(value, str | bytes)
 
 
+def check_fixed_params(key: str, params: Mapping[str, Any] | None) -> None:
+    """Refuse a fixed value of a numeric drawable parameter that is not a finite number.
+
+    Checked once per scene (before the first trial), so ``sigma=abc`` is one line
+    naming the field instead of numpy's error in the middle of a run.
+    """
+    kwargs = dict(params or {})
+    for param, kind in EFFECT_DRAWS.get(effect_name(key), {}).items():
+        fixed = kwargs.get(param)
+        if fixed is None or kind == "choice" or _is_list(fixed):
+            continue
+        number = isinstance(fixed, int | float) and not isinstance(fixed, bool)
+        if not (number and np.isfinite(fixed)):
+            raise SimulationError(
+                f"scene.effects.{key}.{param}: expected a finite number or [lo, hi]; "
+                f"got {fixed!r}"
+            )
+
+
 def draw_effect_params(
     key: str, params: Mapping[str, Any] | None, rng: np.random.Generator
 ) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -272,6 +291,8 @@ class Scene:
             raise SimulationError(
                 f"scene {self.name!r}: unknown effects {unknown} (scene.effects); known: {sorted(EFFECTS)}"
             )
+        for key, params in self.effects.items():
+            check_fixed_params(key, params)
         if self.order is not None:
             order = [str(k) for k in self.order]
             missing = sorted(set(self.effects) - set(order))

@@ -21,7 +21,7 @@ from slipkit.data.dataset import Dataset
 from slipkit.data.splits import split_by_trial
 from slipkit.errors import SlipkitError
 from slipkit.evaluate.metrics import classification_metrics, delay_summary
-from slipkit.features.pins import SLIP, STATIC, Variant
+from slipkit.features.pins import SLIP, STATIC, VARIANTS, Variant
 from slipkit.features.tactip import DatasetFeatures, dataset_features
 from slipkit.models.online import detection_delay, first_detection
 from slipkit.train.search import (
@@ -78,6 +78,10 @@ class TacTipFrames(Task):
         stream: str = "pins",
         label: str = "slip_onset_s",
     ) -> None:
+        if variant not in VARIANTS:
+            raise SlipkitError(
+                f"task.variant={variant}: expected one of {', '.join(VARIANTS)}"
+            )
         self.variant = variant
         self.n_slip = n_slip
         self.test_size = test_size
