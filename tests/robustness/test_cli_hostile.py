@@ -302,7 +302,7 @@ def test_a_bug_is_one_line_with_the_traceback_in_a_log(
     log = Path(lines[0][len(head) : -1])
     assert tmp_path / "logs" == log.parent
     text = log.read_text(encoding="utf-8")
-    assert ("Traceback" in text, "boom" in text) == (True, True)
+    assert (True, True) == ("Traceback" in text, "boom" in text)
 
 
 def test_hydra_full_error_does_not_bring_the_traceback_back(
@@ -314,10 +314,13 @@ def test_hydra_full_error_does_not_bring_the_traceback_back(
     assert (
         2,
         ["slipkit export: error: run=...: missing; this option is required"],
-    ) == (
-        code,
-        lines,
-    )
+    ) == (code, lines)
+    code, lines = cli(["compare", "comparison=nope"], capsys)  # Hydra's own error
+    assert (2, 1) == (code, len(lines)), lines
+    assert lines[0].startswith(
+        "slipkit compare: error: In 'compare': Could not find 'comparison/nope'; "
+        "available: biotac_force, "
+    ), lines[0]
     assert "1" == os.environ.get("HYDRA_FULL_ERROR")
 
 
@@ -325,8 +328,8 @@ def test_the_cli_leaves_hydra_full_error_unset(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
     """The CLI sets HYDRA_FULL_ERROR only while Hydra runs, then removes it again."""
-    cli(["info"], capsys)
-    assert os.environ.get("HYDRA_FULL_ERROR") is None
+    cli(["compare", "comparison=nope"], capsys)
+    assert None is os.environ.get("HYDRA_FULL_ERROR")
 
 
 def test_console_script_prints_one_line(tmp_path: Path) -> None:
