@@ -41,6 +41,8 @@ def small(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, pd.DataFrame]
             "trials_per_speed=2",
             "train_trials=8",
             "closedloop.oracle_delays_ms=[]",
+            "~closedloop.detectors.svm_linear_k2",
+            "~closedloop.runs.svm_linear",
         ],
     )
     yield tmp / "cl", summary

@@ -30,7 +30,7 @@ import pandas as pd
 from omegaconf import DictConfig, OmegaConf
 
 from slipkit._files import atomic_dir, check_out_path
-from slipkit._options import COUNT, FLAG, SEED, TEXT, check_rules, check_value
+from slipkit._options import COUNT, SEED, check_options, check_value
 from slipkit.closedloop.detectors import (
     BundleDetector,
     Detector,
@@ -44,16 +44,6 @@ from slipkit.errors import SlipkitError
 from slipkit.train.runs import new_run_dir
 
 log = logging.getLogger("slipkit.closedloop")
-
-OPTIONS = {
-    "scenario": TEXT,
-    "runs_dir": TEXT,
-    "out": TEXT.null(),
-    "overwrite": FLAG,
-    "trials_per_speed": COUNT.null(),
-    "train_trials": COUNT.null(),
-    "warmup": COUNT,
-}
 
 
 def _compose(name: str, overrides: list[str]) -> DictConfig:
@@ -170,7 +160,7 @@ def build_detectors(
         run_name = str(node.run)
         if run_name not in (scen.get("runs") or {}):
             raise SlipkitError(
-                f"scenario.detectors.{name}.run={run_name}: not one of scenario.runs "
+                f"closedloop.detectors.{name}.run={run_name}: not one of closedloop.runs "
                 f"({', '.join(map(str, scen.get('runs') or {}))})"
             )
         if run_name not in runs:
@@ -183,7 +173,7 @@ def build_detectors(
             )
             log.info("trained %s in %.1f s", run_name, time.perf_counter() - start)
         k = int(node.debounce_k)
-        check_value(f"scenario.detectors.{name}.debounce_k", k, COUNT)
+        check_value(f"closedloop.detectors.{name}.debounce_k", k, COUNT)
         bundle = export_bundle(runs[run_name], folder / "bundles" / str(name), k)
         det = BundleDetector(bundle, str(name), warmup=warmup)
         detectors.append(det)
@@ -218,7 +208,7 @@ def run_scenario(
         raise SlipkitError("seeds=[]: list at least one seed")
     plain = OmegaConf.to_container(scen.plant, resolve=True)
     if not isinstance(plain, dict):
-        raise SlipkitError("scenario.plant: expected a mapping of plant parameters")
+        raise SlipkitError("closedloop.plant: expected a mapping of plant parameters")
     plant = {str(k): v for k, v in plain.items()}
     check_scenario(plant)
     scene_cfg = _compose("train", [f"scene={scen.scene}"]).scene
@@ -253,7 +243,7 @@ def run_scenario(
 
 def closedloop_main(cfg: DictConfig) -> Path:
     """Run the scenario ``cfg.scenario``; write the output folder; print its report's path last."""
-    check_rules(cfg, OPTIONS)
+    check_options(cfg, "closedloop")  # also run by the CLI; here for direct calls
     scen = load_scenario(cfg)
     out = (
         Path(str(cfg.out))

@@ -126,7 +126,7 @@ def run_tactip_trial(
     model = scene.model
     if not isinstance(model, TacTipGravityDrop):
         raise SlipkitError(
-            f"scenario.scene: the TacTip closed loop needs a TacTip gravity-drop "
+            f"closedloop.scene: the TacTip closed loop needs a TacTip gravity-drop "
             f"scene; got {type(model).__name__}"
         )
     rng = np.random.default_rng([int(seed), int(speed_index), int(trial)])

@@ -112,10 +112,11 @@ class TacTipSensor:
         model = scene.model
         if not isinstance(model, TacTipGravityDrop):
             raise SlipkitError(
-                f"scenario.scene: the TacTip closed loop needs a TacTip gravity-drop "
+                f"closedloop.scene: the TacTip closed loop needs a TacTip gravity-drop "
                 f"scene; got {type(model).__name__}"
             )
         self.model = model
+        self.scene_name = scene.name
         self.trial = trial
         self.rng = rng
         self.keys = scene.effect_keys()
@@ -126,7 +127,7 @@ class TacTipSensor:
         ]
         if unknown:
             raise SlipkitError(
-                f"scenario.scene.effects: {unknown} cannot be evaluated one frame at a "
+                f"configs/scene/{scene.name}.yaml effects {unknown}: cannot be evaluated one frame at a "
                 f"time by the closed loop; it knows {sorted(SKIN_EFFECTS | FRAME_EFFECTS | RECURSIVE_EFFECTS)}"
             )
         self.params: dict[str, dict[str, Any]] = {}
@@ -156,7 +157,7 @@ class TacTipSensor:
         )
         if sigma < 0 or not corr > 0 or not ramp > 0:
             raise SlipkitError(
-                f"scenario.scene.effects.{key}: need sigma_mm >= 0, corr_s > 0, "
+                f"configs/scene/{self.scene_name}.yaml effects.{key}: need sigma_mm >= 0, corr_s > 0, "
                 f"ramp_s > 0; got {sigma!r}, {corr!r}, {ramp!r}"
             )
         phi = math.exp(-self.dt / corr)
@@ -228,11 +229,11 @@ def check_scenario(plant: Mapping[str, Any]) -> None:
         value = plant.get(key)
         if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
             raise SlipkitError(
-                f"scenario.plant.{key}: expected a finite number >= 0 s; got {value!r}"
+                f"closedloop.plant.{key}: expected a finite number >= 0 s; got {value!r}"
             )
     for key in ("catch_mm_s", "catch_indentation_mm", "travel_mm", "post_s"):
         value = plant.get(key)
         if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
             raise SlipkitError(
-                f"scenario.plant.{key}: expected a finite number > 0; got {value!r}"
+                f"closedloop.plant.{key}: expected a finite number > 0; got {value!r}"
             )
