@@ -69,7 +69,7 @@ def test_sliptack_speed_train_and_evaluate(
     objective = train_main(cfg)
     run = tmp_path / "run"
     metrics = json.loads((run / "metrics.json").read_text())
-    assert objective == pytest.approx(metrics["test"]["overall"]["mae_mm_s"])
+    assert objective == pytest.approx(metrics["validation"]["overall"]["mae_mm_s"])
     assert {"*"} <= set(metrics["stick_length_mm"])
     curve = pd.read_csv(run / "speed_trials.csv")
     assert len(metrics["split"]["test"]) == len(curve)
@@ -93,8 +93,11 @@ def test_sliptack_speed_train_and_evaluate(
 def test_sliptack_accel_train_and_evaluate(tmp_path: Path) -> None:
     """A shrunk drop run calibrates eq. 4 and eq. 5 and scores both on unseen trials."""
     cfg = compose_train(tmp_path, "sliptack_accel", "dataset.n_trials=8")
-    train_main(cfg)
+    objective = train_main(cfg)
     metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    validation = metrics["validation"]
+    assert ("group-kfold by trial", 3) == (validation["cv"], validation["k"])
+    assert objective == pytest.approx(validation["deflection"]["rmse_m_s2"])
     assert {"deflection", "frequency_slope"} == set(metrics["test"])
     assert metrics["calibration"]["deflection"]["coef"] < 0
     scores = evaluate_unseen(tmp_path, "sliptack_drop", 4)

@@ -94,6 +94,47 @@ def group_cv(
     }
 
 
+def mean_leaves(dicts: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """Per key, the NaN-aware mean of the numeric leaves of ``dicts`` (same layout):
+    the fold average of a task's nested metrics."""
+    out: dict[str, Any] = {}
+    for key, first in dicts[0].items():
+        values = [d.get(key) for d in dicts]
+        if isinstance(first, Mapping):
+            out[key] = mean_leaves([v for v in values if isinstance(v, Mapping)])
+        elif isinstance(first, int | float) and not isinstance(first, bool):
+            nums = np.asarray(
+                [v for v in values if isinstance(v, int | float)], dtype=float
+            )
+            out[key] = float(np.nanmean(nums)) if np.isfinite(nums).any() else np.nan
+    return out
+
+
+def trial_cv(
+    trial_ids: Sequence[str],
+    fit_score: Any,
+    *,
+    cv: int = 3,
+    label: str = "validation",
+) -> dict[str, Any]:
+    """Group CV by trial for tasks whose fit and scoring work on datasets.
+
+    ``fit_score(train_ids, held_out_ids)`` fits on the first trials and returns the
+    task's metrics dict on the second; the folds' metrics are averaged
+    (:func:`mean_leaves`). ``k = min(cv, n_trials)``; fewer than 2 trials is a
+    :class:`~slipkit.data.splits.SplitError`.
+    """
+    ids = np.asarray(list(trial_ids), dtype=object)
+    k = min(int(cv), len(ids))
+    _check_groups(ids, k, "trial")  # SplitError (one line) below 2 trials
+    start = time.perf_counter()
+    folds = []
+    for i, (a, b) in enumerate(GroupKFold(n_splits=k).split(ids, groups=ids)):
+        folds.append(fit_score(list(ids[a]), list(ids[b])))
+        _progress(f"{label}: fold", i + 1, k, start)
+    return {"cv": "group-kfold by trial", "k": k, **mean_leaves(folds)}
+
+
 def _score(model: Any, X: np.ndarray, y: np.ndarray, scoring: str) -> float:
     return float(get_scorer(scoring)(model, X, y))
 
@@ -252,4 +293,12 @@ def format_best(record: Mapping[str, Any]) -> str:
     )
 
 
-__all__ = ["METHOD", "format_best", "group_cv", "optuna_search", "selection_record"]
+__all__ = [
+    "METHOD",
+    "format_best",
+    "group_cv",
+    "mean_leaves",
+    "optuna_search",
+    "selection_record",
+    "trial_cv",
+]

@@ -56,6 +56,7 @@ from slipkit.baselines.base import segment_bounds
 from slipkit.data.dataset import Dataset
 from slipkit.data.splits import split_by_trial
 from slipkit.errors import SlipkitError
+from slipkit.train.search import mean_leaves
 from slipkit.train.task import Task, TaskResult
 
 log = logging.getLogger("slipkit.detection")
@@ -652,7 +653,7 @@ class StreamDetection(Task):
             self._fit_one(det, rec_a)
             folds.append(self.score(det, rec_b)[0])
             log.info("validation fold %d/%d done", j + 1, k)
-        return {"cv": "group-kfold by trial", "k": k, **_mean_leaves(folds)}
+        return {"cv": "group-kfold by trial", "k": k, **mean_leaves(folds)}
 
     def evaluate(self, model: Any, dataset: Dataset, *, out: Path) -> dict[str, Any]:
         metrics: dict[str, Any] = {"detectors": {}}
@@ -779,18 +780,3 @@ def _plot_roc(curves: Mapping[str, Mapping[str, Any]], path: Path) -> None:
 
 
 __all__ = ["Recordings", "StreamDetection"]
-
-
-def _mean_leaves(dicts: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-    """Per key, the NaN-aware mean of the numeric leaves of ``dicts`` (same layout)."""
-    out: dict[str, Any] = {}
-    for key, first in dicts[0].items():
-        values = [d.get(key) for d in dicts]
-        if isinstance(first, Mapping):
-            out[key] = _mean_leaves([v for v in values if isinstance(v, Mapping)])
-        elif isinstance(first, int | float) and not isinstance(first, bool):
-            nums = np.asarray(
-                [v for v in values if isinstance(v, int | float)], dtype=float
-            )
-            out[key] = float(np.nanmean(nums)) if np.isfinite(nums).any() else math.nan
-    return out

@@ -26,6 +26,7 @@ from sklearn.base import clone
 from slipkit.data.dataset import Dataset, Trial
 from slipkit.data.splits import TrialSplit, split_by_trial
 from slipkit.errors import SlipkitError
+from slipkit.train.search import trial_cv
 from slipkit.train.task import Task, TaskResult
 
 log = logging.getLogger("slipkit.sliptack")
@@ -39,6 +40,12 @@ def _split(dataset: Dataset, test_size: float, seed: int, group: str) -> TrialSp
         return split_by_trial(dataset, test_size=test_size, seed=seed, stratify=group)
     except (ValueError, KeyError):
         return split_by_trial(dataset, test_size=test_size, seed=seed)
+
+
+def _validation(train: Dataset, fit_score: Any, cv: int, label: str) -> dict[str, Any]:
+    """Group CV by trial on the training half (the run's objective), never the test
+    half; a SplitError (one line) when the training half has fewer than 2 trials."""
+    return trial_cv(train.trial_ids, fit_score, cv=int(cv), label=label)
 
 
 def _column(trial: Trial, stream: str, column: str) -> np.ndarray:
@@ -104,7 +111,8 @@ class SlipTackSpeed(Task):
         Trial labels: pull speed (mm/s) and pull start (s).
     """
 
-    objective = "test.overall.mae_mm_s"
+    #: validation: calibrations refitted by group CV by trial on the training half
+    objective = "validation.overall.mae_mm_s"
     direction = "minimize"
 
     def __init__(
@@ -120,7 +128,9 @@ class SlipTackSpeed(Task):
         truth_column: str = "speed",
         speed_label: str = "speed_mm_s",
         onset_label: str = "slip_onset_s",
+        cv: int = 3,
     ) -> None:
+        self.cv = cv
         self.friction = friction
         self.group = group
         self.test_size = test_size
@@ -309,7 +319,17 @@ class SlipTackSpeed(Task):
         split = _split(dataset, self.test_size, seed, self.group)
         train, _, test = split.apply(dataset)
         log.info("trials: %d train, %d test", len(train), len(test))
-        models = self.fit_models(model, train)
+        models = self.fit_models(model, train)  # its own errors come first
+        validation = _validation(
+            train,
+            lambda a, b: self.summarise(
+                self.trial_table(
+                    self.fit_models(model, train.subset(a)), train.subset(b)
+                )
+            ),
+            self.cv,
+            "SlipTack speed validation",
+        )
         m_train = self.summarise(self.trial_table(models, train))
         table = self.trial_table(models, test)
         m_test = self.summarise(table)
@@ -322,6 +342,7 @@ class SlipTackSpeed(Task):
                 k: 1e3 * float(m.stick_length_m_) for k, m in models.items()
             },
             "saturation_hz": float(first.saturation_hz_),
+            "validation": validation,
             "train": m_train,
             "test": m_test,
         }
@@ -378,7 +399,8 @@ class SlipTackAccel(Task):
         Group column used to stratify the split.
     """
 
-    objective = "test.deflection.rmse_m_s2"
+    #: validation: calibrations refitted by group CV by trial on the training half
+    objective = "validation.deflection.rmse_m_s2"
     direction = "minimize"
 
     def __init__(
@@ -395,7 +417,9 @@ class SlipTackAccel(Task):
         release_label: str = "release_s",
         onset_label: str = "slip_onset_s",
         group: str = "material",
+        cv: int = 3,
     ) -> None:
+        self.cv = cv
         self.features = features
         self.test_size = test_size
         self.window_delay_s = window_delay_s
@@ -476,11 +500,23 @@ class SlipTackAccel(Task):
     def fit(self, model: Any, dataset: Dataset, *, seed: int, out: Path) -> TaskResult:
         split = _split(dataset, self.test_size, seed, self.group)
         train, _, test = split.apply(dataset)
-        X, y, seg = self._xy(train)
-        models = {
-            f: clone(model).set_params(feature=f).fit(X, y, segments=seg)
-            for f in self.features
-        }
+
+        def fit(part: Dataset) -> dict[str, Any]:
+            X, y, seg = self._xy(part)
+            return {
+                f: clone(model).set_params(feature=f).fit(X, y, segments=seg)
+                for f in self.features
+            }
+
+        models = fit(train)  # its own errors come first
+        validation = _validation(
+            train,
+            lambda a, b: self.summarise(
+                self.trial_table(fit(train.subset(a)), train.subset(b))
+            ),
+            self.cv,
+            "SlipTack acceleration validation",
+        )
         table = self.trial_table(models, test)
         table.to_csv(out / "accel_trials.csv", index=False)
         metrics = {
@@ -489,6 +525,7 @@ class SlipTackAccel(Task):
                 f: {"intercept_m_s2": m.intercept_, "coef": m.coef_, "r_samples": m.r_}
                 for f, m in models.items()
             },
+            "validation": validation,
             "train": self.summarise(self.trial_table(models, train)),
             "test": self.summarise(table),
         }
