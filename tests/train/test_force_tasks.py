@@ -321,3 +321,24 @@ def test_finger_direction_block_split_reports_both_and_keeps_test_out_of_validat
     assert clean["test"]["angle_mean_deg"] != bad["test"]["angle_mean_deg"]
     assert clean["validation"] == bad["validation"]
     assert task.objective_value(clean) == task.objective_value(bad)
+
+
+@pytest.mark.realdata
+def test_finger_direction_block_split_on_the_real_recordings(
+    shared_data: Path, tmp_path: Path
+):
+    """On the real data the held-out block is harder than random samples, yet the
+    weighted normals still beat the constant direction on it."""
+    folder = shared_data / "robotic-finger"
+    if not folder.is_dir():
+        pytest.skip(f"{folder} not present")
+    task = FingerDirection(split="block", also_split=("random",), cv=0)
+    m = task.fit(
+        WeightedNormalsRegressor(), read_robotic_finger(folder), seed=0, out=tmp_path
+    ).metrics
+    block = m["splits"]["block"]
+    assert "contiguous block" == block["by"]
+    assert (
+        m["test"]["angle_mean_deg"]
+        < block["constant_mean_direction"]["test"]["angle_mean_deg"]
+    )
