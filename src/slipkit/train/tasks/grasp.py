@@ -57,9 +57,10 @@ class GraspFeatures(TransformerMixin, BaseEstimator):
     """Electrodes + one-hot orientation -> model features, one orientation handling.
 
     Input columns: ``n_electrodes`` electrode values (counts), then one 0/1 column per
-    orientation (the task appends them). Every mode is one linear formula,
-    ``Z = (E @ W - onehot @ M) / (onehot @ S)`` plus, for ``orientation_feature``, the one-hot
-    ``onehot`` appended, so an ONNX graph is a handful of MatMul / Sub / Div nodes.
+    orientation (the task appends them). With ``E`` the electrodes and ``O`` the one-hot
+    columns, every mode is one formula, ``Z = (E @ W - O @ M) / (O @ S)``, plus ``O``
+    appended for ``orientation_feature``, so its ONNX graph is a handful of MatMul / Sub /
+    Div nodes.
 
     Parameters
     ----------
@@ -119,7 +120,7 @@ class GraspFeatures(TransformerMixin, BaseEstimator):
         return self
 
     def transform(self, X: Any) -> np.ndarray:
-        """``(E @ W - onehot @ M) / (onehot @ S)``, then ``onehot`` for ``orientation_feature``."""
+        """``(E @ W - O @ M) / (O @ S)``, then ``O`` for ``orientation_feature``."""
         check_is_fitted(self, "W_")
         # reset=False: keep n_features_in_ from fit, only check the shape.
         X = validate_data(self, X, reset=False)
