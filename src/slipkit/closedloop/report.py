@@ -170,7 +170,7 @@ def headline_plot(summary: pd.DataFrame, path: Path, *, title: str) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(14, 4.2), constrained_layout=True)
     curve = summary[summary["kind"] == "delayed oracle"]
     base = summary[summary["kind"] == "oracle"]
     plant = pd.concat([base, curve]).sort_values("delay_ms")
@@ -216,7 +216,8 @@ def headline_plot(summary: pd.DataFrame, path: Path, *, title: str) -> Path:
     ax1.set_xlabel("detection delay in the loop (ms)")
     ax1.set_ylabel("slip distance at arrest (mm)")
     ax1.set_title("slip against detection delay")
-    ax1.legend(fontsize=8, loc="upper left")
+    # Outside the axes: no legend can cover a point, whatever the numbers.
+    ax1.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     budgets = bundles["p99_budget_us"].dropna().unique()
     for b in budgets:
         ax2.axvline(float(b), color="r", linestyle="--", label=f"p99 budget {b:.0f} us")
@@ -229,7 +230,7 @@ def headline_plot(summary: pd.DataFrame, path: Path, *, title: str) -> Path:
         ax2.xaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
         ax2.xaxis.set_major_formatter(ScalarFormatter())
         ax2.xaxis.set_minor_formatter(NullFormatter())
-        ax2.legend(fontsize=8, loc="upper left")
+        ax2.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     ax2.set_xlabel("compute per frame, p99 of the runtime loop (us)")
     ax2.set_ylabel("slip distance at arrest (mm)")
     ax2.set_title("slip against compute per frame")
