@@ -37,7 +37,7 @@ from slipkit.closedloop.detectors import (
     NoDetector,
     OracleDetector,
 )
-from slipkit.closedloop.report import summarize, write_report
+from slipkit.closedloop.report import markdown_table, summarize, write_report
 from slipkit.closedloop.run import run_detector, speed_grid
 from slipkit.closedloop.tactip import check_scenario
 from slipkit.errors import SlipkitError
@@ -85,13 +85,14 @@ def _command(cfg: DictConfig) -> str:
 
 
 def _quiet(fn: Any, *args: Any) -> tuple[Any, str]:
-    """Call ``fn(*args)`` with its printout captured and ``slipkit.*`` logs off the console."""
+    """Call ``fn(*args)`` with its printout (stdout and stderr) captured and ``slipkit.*`` logs off the console."""
     buf = io.StringIO()
     logger = logging.getLogger("slipkit")
     saved = logger.propagate
     logger.propagate = False
     try:
-        with contextlib.redirect_stdout(buf):
+        # stderr too: the task's progress lines would interleave with the command's.
+        with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(buf):
             out = fn(*args)
     finally:
         logger.propagate = saved
@@ -267,6 +268,6 @@ def closedloop_main(cfg: DictConfig) -> Path:
             seeds=[int(s) for s in cfg.seeds],
         )
     report = out / "report.md"
-    print(summary.to_string(index=False))
+    print(markdown_table(summary))
     print(report)
     return report
