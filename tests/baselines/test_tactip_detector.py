@@ -138,3 +138,17 @@ def test_fitted_on_the_127_pin_hard_scene_it_detects_331_pin_slips_on_time() -> 
         fired = np.flatnonzero(pred[a + 1 : b])  # sample j + 1 ends velocity frame j
         delays.append(int(fired[0]) - onset_frame if len(fired) else None)
     assert [True] * 10 == [d is not None and 0 <= d <= 2 for d in delays]
+
+
+def test_onset_calibration_puts_the_threshold_mid_gap() -> None:
+    """With separable trials the free threshold is halfway between the largest pre-onset score
+    and the smallest on-time slip score, not at the edge of either."""
+    parts = [stretch_then_snap(31, seed=s) for s in range(3)]
+    X = np.vstack([p[0] for p in parts])
+    y = np.concatenate([p[1] for p in parts])
+    seg = np.repeat(np.arange(3), 80)
+    det = PinMotionDetector().fit(X, y, segments=seg)
+    units, best = det.onset_units(y, det.decision_function(X, segments=seg), seg)
+    before, on_time = best[units == 0].max(), best[units == 1].min()
+    assert before < on_time
+    assert pytest.approx(0.5 * (before + on_time), rel=1e-12) == det.threshold_

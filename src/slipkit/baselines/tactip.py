@@ -37,11 +37,11 @@ from numbers import Integral
 from typing import Any, ClassVar
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_array
 
-from slipkit.baselines.base import FloatArray, StreamDetector
+from slipkit.baselines.base import FloatArray, StreamDetector, segment_bounds
 
 #: Smallest reference displacement (mm) the reversal divides by: below it the
 #: reference has no direction and the score is 0 (no evidence of a reversal).
@@ -90,10 +90,21 @@ class PinMotionDetector(StreamDetector):
         (``"reversal"`` only; >= 1).
     consecutive : int
         Frames whose raw scores must all reach the threshold (min-combined).
+    calibration : {"onset", "sample"}
+        How ``fit`` chooses a free threshold. ``"onset"``: on the ROC of per-trial
+        units -- each recording's largest score in its first ``onset_frames``
+        slip-labelled frames (positive: "detected on time") and its largest score
+        before the onset (negative: "an alarm before onset") -- at the best
+        Youden point, placed in the middle of the gap of unit scores that gives it
+        (not at its edge, so a test slip a little weaker than every training slip
+        is still caught). ``"sample"``: the base class's per-sample ROC.
+    onset_frames : int
+        Frames from the first slip-labelled frame that count as on time.
     threshold : float or None
-        Slip when ``score >= threshold`` (mm/frame); None chooses it on the ROC.
+        Slip when ``score >= threshold`` (mm/frame); None chooses it by
+        ``calibration``.
     roc_point : {"youden", "closest"}
-        ROC point chosen when ``threshold`` is None.
+        ROC point of the per-sample ROC (``calibration="sample"``).
 
     Attributes
     ----------
@@ -111,6 +122,8 @@ class PinMotionDetector(StreamDetector):
         "lookback": [Interval(Integral, 1, None, closed="left")],
         "gap": [Interval(Integral, 1, None, closed="left")],
         "consecutive": [Interval(Integral, 1, None, closed="left")],
+        "calibration": [StrOptions({"onset", "sample"})],
+        "onset_frames": [Interval(Integral, 1, None, closed="left")],
     }
     n_channels: ClassVar[int | None] = None  # 2 N: x block, y block
     #: any pin count is scored (``slipkit evaluate`` lets another pin layout through)
@@ -123,6 +136,8 @@ class PinMotionDetector(StreamDetector):
         lookback: int = 20,
         gap: int = 2,
         consecutive: int = 2,
+        calibration: str = "onset",
+        onset_frames: int = 3,
         threshold: float | None = None,
         roc_point: str = "youden",
     ) -> None:
@@ -131,6 +146,8 @@ class PinMotionDetector(StreamDetector):
         self.lookback = lookback
         self.gap = gap
         self.consecutive = consecutive
+        self.calibration = calibration
+        self.onset_frames = onset_frames
 
     @property
     def span(self) -> int:
@@ -188,6 +205,58 @@ class PinMotionDetector(StreamDetector):
         if len(r) >= c:
             out[c - 1 :] = np.lib.stride_tricks.sliding_window_view(r, c).min(axis=1)
         return out
+
+    def onset_units(
+        self, y: NDArray[np.int_], scores: FloatArray, segments: ArrayLike | None
+    ) -> tuple[NDArray[np.int_], FloatArray]:
+        """Per-recording units of the ``"onset"`` calibration: (label, largest score)."""
+        labels: list[int] = []
+        best: list[float] = []
+        k = int(self.onset_frames)
+        for a, b in segment_bounds(len(y), segments):
+            slip = np.flatnonzero(y[a:b] == 1)
+            onset = int(slip[0]) if len(slip) else b - a
+            if onset > 0:
+                labels.append(0)
+                best.append(float(np.max(scores[a : a + onset])))
+            if len(slip):
+                labels.append(1)
+                best.append(float(np.max(scores[a + onset : a + onset + k])))
+        return np.asarray(labels, dtype=int), np.asarray(best)
+
+    def _calibrate(
+        self,
+        X: FloatArray,
+        y: NDArray[np.int_],
+        scores: FloatArray,
+        segments: ArrayLike | None,
+    ) -> None:
+        super()._calibrate(X, y, scores, segments)
+        if self.threshold is not None or self.calibration != "onset":
+            return
+        units, best = self.onset_units(y, scores, segments)
+        pos, neg = best[units == 1], best[units == 0]
+        if not len(pos) or not len(neg):
+            return  # the sample ROC's choice stands
+        # Youden's J = TPR - FPR at every candidate threshold (each unit score), then
+        # the middle of the widest gap below an optimal candidate: every threshold in
+        # (previous score, candidate] gives the same J.
+        cand = np.unique(best[np.isfinite(best)])
+        if not len(cand):
+            return
+        j = np.array([(pos >= c).mean() - (neg >= c).mean() for c in cand])
+        below = np.concatenate([[-np.inf], cand[:-1]])
+        top = np.flatnonzero(j == j.max())
+        gaps = cand[top] - np.where(np.isfinite(below[top]), below[top], cand[top])
+        i = int(top[np.argmax(gaps)])
+        lo = below[i] if np.isfinite(below[i]) else cand[i]
+        self.threshold_ = float(0.5 * (lo + cand[i]))
+        finite = np.where(np.isfinite(scores), scores, np.finfo(np.float64).min)
+        pred = finite >= self.threshold_
+        self.tpr_ = float(pred[y == 1].mean()) if (y == 1).any() else float("nan")
+        self.fnr_ = 1.0 - self.tpr_
+        self.fpr_ = float(pred[y == 0].mean()) if (y == 0).any() else float("nan")
+        self.tnr_ = 1.0 - self.fpr_
 
     def _new_stream(self) -> PinMotionStream:
         return PinMotionStream(self)
