@@ -207,3 +207,70 @@ def test_sensor_default_period_only_without_a_data_rate() -> None:
         "p99": pytest.approx(0.3333),
         "source": "sensor_default",
     } == budget
+
+
+@pytest.mark.slow
+@pytest.mark.realdata
+def test_real_dos_bundle_checks_every_direction_on_its_10_ms_frame(
+    shared_data: Path, tmp_path: Path
+) -> None:
+    """BioTacSP-DoS: export slips on every direction against t, 100 Hz budget, all 7 classes replayed; slipkit-run --check passes."""
+    if not (shared_data / "biotacsp-dos").is_dir():
+        pytest.skip("biotacsp-dos is not among the real recordings")
+    train_main(
+        _compose(
+            "train",
+            [
+                "experiment=dos_real",
+                f"dataset.raw={shared_data / 'biotacsp-dos'}",
+                # a fixed scikit-learn pipeline, not the experiment's nested model search
+                "model=window_stats_lr",
+                "task.sweep=[]",
+                "~task.compare",
+                "task.first_frame_control=false",
+                "task.dynamics=null",
+                f"run_dir={tmp_path / 'run'}",
+            ],
+        )
+    )
+    m = _export(tmp_path / "run", tmp_path / "b")
+    directions = ["aw", "cw", "e", "n", "s", "w"]
+    assert (directions, ["t"]) == (
+        sorted(m["decision"]["slip_classes"]),
+        sorted(set(m["decision"]["classes"]) - set(m["decision"]["slip_classes"])),
+    )
+    assert {"frame_period": 10.0, "p99": 1.0, "source": "data_rate_hz"} == m[
+        "budget_ms"
+    ]
+    replay = m["training"]["replay"]
+    assert (sorted([*directions, "t"]), False) == (
+        sorted(replay["by_class"]),
+        replay["held_out"],
+    )
+    assert (True, False) == (
+        m["training"]["refit_on_all_data"],
+        m["training"]["held_out"],
+    )
+    summary = tmp_path / "s.json"
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "slipkit.runtime.cli",
+            str(tmp_path / "b"),
+            "--replay",
+            str(tmp_path / "b" / "replay.npz"),
+            "--check",
+            "--json",
+            str(summary),
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert (0, "") == (proc.returncode, proc.stderr)
+    got = json.loads(summary.read_text())
+    by_class = got["decisions_by_class"]
+    assert sorted([*directions, "t"]) == sorted(by_class)
+    assert got["decisions"] - by_class["t"] == got["slip_decisions"]
+    assert 0 < got["slip_decisions"]
