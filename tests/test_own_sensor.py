@@ -43,7 +43,7 @@ def test_generic_detectors_fit_score_and_export_on_an_imported_csv(
     tmp_path: Path,
 ) -> None:
     """Core of the walk in-process: the CSV importer's dataset, both generic detectors through
-    the stream-detection task: test slips separated from non-slip time, no early alarm, graphs in parity."""
+    the stream-detection task: every test slip caught, no early alarm, graphs in parity."""
     ds = read_csv_dataset(
         write_csvs(tmp_path / "csvs", n_trials=8),
         sensor="generic",
@@ -52,7 +52,7 @@ def test_generic_detectors_fit_score_and_export_on_an_imported_csv(
         label_columns=["slip_onset_s"],
     )
     task = StreamDetection(
-        stream="signal", roc_unit="event", negative_window_s=0.1, name="own"
+        stream="signal", roc_unit="sample", negative_window_s=0.1, name="own"
     )
     train = ds.subset(ds.trial_ids[:4])
     test = ds.subset(ds.trial_ids[4:])
@@ -61,8 +61,12 @@ def test_generic_detectors_fit_score_and_export_on_an_imported_csv(
     for det in (ChannelChangeDetector(feature="energy"), WindowClassifierDetector()):
         task._fit_one(det, rec_tr)
         metrics, _, _ = task.score(det, rec_te)
-        # Every test slip outscores all non-slip time (event AUC 1), no alarm before an onset.
-        assert (1.0, 0) == (metrics["events"]["auc"], metrics["trials"]["fp"])
+        # Every test slip caught, no alarm before an onset, slips outscore non-slip time.
+        assert (4, 0, 1.0) == (
+            metrics["trials"]["tp"],
+            metrics["trials"]["fp"],
+            metrics["events"]["auc"],
+        )
         report = check_detector_parity(
             det, export(det), rec_te.X, segments=rec_te.segments
         )

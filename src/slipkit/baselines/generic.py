@@ -24,7 +24,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 from sklearn.utils._param_validation import Interval, StrOptions
 
 from slipkit.baselines.base import FloatArray, StreamDetector, segment_bounds
@@ -59,7 +59,86 @@ class RingStream:
         return score, score >= self._threshold
 
 
-class ChannelChangeDetector(StreamDetector):
+class OnsetCalibration:
+    """``calibration="onset"``: a free threshold from a per-recording ROC, mid-gap.
+
+    Mixed in before :class:`~slipkit.baselines.base.StreamDetector` by detectors with
+    ``calibration`` ({"onset", "sample"}) and ``onset_frames`` (int or None)
+    parameters. Units, one pair per training recording: its largest score in its
+    first ``onset_frames`` slip-labelled samples (all of them for None) -- positive,
+    "slip detected on time" -- and its largest score before its first slip sample --
+    negative, "an alarm before the onset". The threshold is the best Youden point of
+    that ROC, placed in the middle of the gap between unit scores that gives it
+    rather than at its edge (scikit-learn's ROC thresholds are the unit scores
+    themselves, so the edge is the weakest training slip: a test slip a little
+    weaker would be missed). ``"sample"`` keeps the base class's per-sample ROC. The
+    per-sample ROC is recorded either way.
+    """
+
+    calibration: str
+    onset_frames: int | None
+    threshold: float | None
+    threshold_: float
+    tpr_: float
+    fnr_: float
+    fpr_: float
+    tnr_: float
+
+    def onset_units(
+        self, y: NDArray[np.int_], scores: FloatArray, segments: ArrayLike | None
+    ) -> tuple[NDArray[np.int_], FloatArray]:
+        """Per-recording units of the ``"onset"`` calibration: (label, largest score)."""
+        labels: list[int] = []
+        best: list[float] = []
+        k = None if self.onset_frames is None else int(self.onset_frames)
+        for a, b in segment_bounds(len(y), segments):
+            slip = np.flatnonzero(y[a:b] == 1)
+            onset = int(slip[0]) if len(slip) else b - a
+            if onset > 0:
+                labels.append(0)
+                best.append(float(np.max(scores[a : a + onset])))
+            if len(slip):
+                labels.append(1)
+                stop = b if k is None else min(b, a + onset + k)
+                best.append(float(np.max(scores[a + onset : stop])))
+        return np.asarray(labels, dtype=int), np.asarray(best)
+
+    def _calibrate(
+        self,
+        X: FloatArray,
+        y: NDArray[np.int_],
+        scores: FloatArray,
+        segments: ArrayLike | None,
+    ) -> None:
+        super()._calibrate(X, y, scores, segments)  # type: ignore[misc]
+        if self.threshold is not None or self.calibration != "onset":
+            return
+        units, best = self.onset_units(y, scores, segments)
+        pos, neg = best[units == 1], best[units == 0]
+        if not len(pos) or not len(neg):
+            return  # the sample ROC's choice stands
+        # Youden's J = TPR - FPR at every candidate threshold (each unit score), then
+        # the middle of the widest gap below an optimal candidate: every threshold in
+        # (previous score, candidate] gives the same J.
+        cand = np.unique(best[np.isfinite(best)])
+        if not len(cand):
+            return
+        j = np.array([(pos >= c).mean() - (neg >= c).mean() for c in cand])
+        below = np.concatenate([[-np.inf], cand[:-1]])
+        top = np.flatnonzero(j == j.max())
+        gaps = cand[top] - np.where(np.isfinite(below[top]), below[top], cand[top])
+        i = int(top[np.argmax(gaps)])
+        lo = below[i] if np.isfinite(below[i]) else cand[i]
+        self.threshold_ = float(0.5 * (lo + cand[i]))
+        finite = np.where(np.isfinite(scores), scores, np.finfo(np.float64).min)
+        pred = finite >= self.threshold_
+        self.tpr_ = float(pred[y == 1].mean()) if (y == 1).any() else float("nan")
+        self.fnr_ = 1.0 - self.tpr_
+        self.fpr_ = float(pred[y == 0].mean()) if (y == 0).any() else float("nan")
+        self.tnr_ = 1.0 - self.fpr_
+
+
+class ChannelChangeDetector(OnsetCalibration, StreamDetector):
     """Per-channel derivative or high-pass energy, scaled, combined over channels.
 
     Parameters
@@ -79,10 +158,16 @@ class ChannelChangeDetector(StreamDetector):
         derivative on slip samples minus that on non-slip samples).
     combine : {"max", "sum"}
         How the scaled channel scores make one score.
+    calibration : {"onset", "sample"}
+        How a free threshold is chosen (:class:`OnsetCalibration`): per-recording
+        units mid-gap, or the per-sample ROC.
+    onset_frames : int or None
+        Samples from the onset that count as on time (None: the whole slip).
     threshold : float or None
-        Slip when the score ``>= threshold`` (in non-slip spreads); None: ROC choice.
+        Slip when the score ``>= threshold`` (in non-slip spreads); None: chosen by
+        ``calibration``.
     roc_point : {"youden", "closest"}
-        ROC point chosen when ``threshold`` is None.
+        ROC point of the per-sample ROC.
 
     Attributes
     ----------
@@ -101,6 +186,8 @@ class ChannelChangeDetector(StreamDetector):
         "window": [Interval(Integral, 1, None, closed="left")],
         "polarity": [StrOptions({"abs", "learned"})],
         "combine": [StrOptions({"max", "sum"})],
+        "calibration": [StrOptions({"onset", "sample"})],
+        "onset_frames": [Interval(Integral, 1, None, closed="left"), None],
     }
     n_channels: ClassVar[int | None] = None
 
@@ -112,6 +199,8 @@ class ChannelChangeDetector(StreamDetector):
         window: int = 10,
         polarity: str = "abs",
         combine: str = "max",
+        calibration: str = "onset",
+        onset_frames: int | None = None,
         threshold: float | None = None,
         roc_point: str = "youden",
     ) -> None:
@@ -121,6 +210,8 @@ class ChannelChangeDetector(StreamDetector):
         self.window = window
         self.polarity = polarity
         self.combine = combine
+        self.calibration = calibration
+        self.onset_frames = onset_frames
 
     @property
     def window_samples(self) -> int:
@@ -195,4 +286,4 @@ class ChannelChangeDetector(StreamDetector):
         return RingStream(self)
 
 
-__all__ = ["MIN_SCALE", "ChannelChangeDetector", "RingStream"]
+__all__ = ["MIN_SCALE", "ChannelChangeDetector", "OnsetCalibration", "RingStream"]

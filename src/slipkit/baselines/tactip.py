@@ -37,11 +37,12 @@ from numbers import Integral
 from typing import Any, ClassVar
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_array
 
-from slipkit.baselines.base import FloatArray, StreamDetector, segment_bounds
+from slipkit.baselines.base import FloatArray, StreamDetector
+from slipkit.baselines.generic import OnsetCalibration
 
 #: Smallest reference displacement (mm) the reversal divides by: below it the
 #: reference has no direction and the score is 0 (no evidence of a reversal).
@@ -76,7 +77,7 @@ def mean_displacement(
     )
 
 
-class PinMotionDetector(StreamDetector):
+class PinMotionDetector(OnsetCalibration, StreamDetector):
     """Slip from the pooled pin motion of a TacTip (any pin count; see the module doc).
 
     Parameters
@@ -205,58 +206,6 @@ class PinMotionDetector(StreamDetector):
         if len(r) >= c:
             out[c - 1 :] = np.lib.stride_tricks.sliding_window_view(r, c).min(axis=1)
         return out
-
-    def onset_units(
-        self, y: NDArray[np.int_], scores: FloatArray, segments: ArrayLike | None
-    ) -> tuple[NDArray[np.int_], FloatArray]:
-        """Per-recording units of the ``"onset"`` calibration: (label, largest score)."""
-        labels: list[int] = []
-        best: list[float] = []
-        k = int(self.onset_frames)
-        for a, b in segment_bounds(len(y), segments):
-            slip = np.flatnonzero(y[a:b] == 1)
-            onset = int(slip[0]) if len(slip) else b - a
-            if onset > 0:
-                labels.append(0)
-                best.append(float(np.max(scores[a : a + onset])))
-            if len(slip):
-                labels.append(1)
-                best.append(float(np.max(scores[a + onset : a + onset + k])))
-        return np.asarray(labels, dtype=int), np.asarray(best)
-
-    def _calibrate(
-        self,
-        X: FloatArray,
-        y: NDArray[np.int_],
-        scores: FloatArray,
-        segments: ArrayLike | None,
-    ) -> None:
-        super()._calibrate(X, y, scores, segments)
-        if self.threshold is not None or self.calibration != "onset":
-            return
-        units, best = self.onset_units(y, scores, segments)
-        pos, neg = best[units == 1], best[units == 0]
-        if not len(pos) or not len(neg):
-            return  # the sample ROC's choice stands
-        # Youden's J = TPR - FPR at every candidate threshold (each unit score), then
-        # the middle of the widest gap below an optimal candidate: every threshold in
-        # (previous score, candidate] gives the same J.
-        cand = np.unique(best[np.isfinite(best)])
-        if not len(cand):
-            return
-        j = np.array([(pos >= c).mean() - (neg >= c).mean() for c in cand])
-        below = np.concatenate([[-np.inf], cand[:-1]])
-        top = np.flatnonzero(j == j.max())
-        gaps = cand[top] - np.where(np.isfinite(below[top]), below[top], cand[top])
-        i = int(top[np.argmax(gaps)])
-        lo = below[i] if np.isfinite(below[i]) else cand[i]
-        self.threshold_ = float(0.5 * (lo + cand[i]))
-        finite = np.where(np.isfinite(scores), scores, np.finfo(np.float64).min)
-        pred = finite >= self.threshold_
-        self.tpr_ = float(pred[y == 1].mean()) if (y == 1).any() else float("nan")
-        self.fnr_ = 1.0 - self.tpr_
-        self.fpr_ = float(pred[y == 0].mean()) if (y == 0).any() else float("nan")
-        self.tnr_ = 1.0 - self.fpr_
 
     def _new_stream(self) -> PinMotionStream:
         return PinMotionStream(self)

@@ -31,7 +31,7 @@ from sklearn.preprocessing import StandardScaler
 from sklearn.utils._param_validation import Interval, StrOptions
 
 from slipkit.baselines.base import FloatArray, StreamDetector, segment_bounds
-from slipkit.baselines.generic import RingStream
+from slipkit.baselines.generic import OnsetCalibration, RingStream
 from slipkit.models.window_features import STATS, WindowStatistics
 
 #: Scores are slip probabilities clipped to ``[PROB_CLIP, 1 - PROB_CLIP]``: the ONNX
@@ -41,7 +41,7 @@ from slipkit.models.window_features import STATS, WindowStatistics
 PROB_CLIP = 2.0**-20
 
 
-class WindowClassifierDetector(StreamDetector):
+class WindowClassifierDetector(OnsetCalibration, StreamDetector):
     """A learned per-sample slip classifier on windows of any stream (see the module doc).
 
     Parameters
@@ -63,10 +63,17 @@ class WindowClassifierDetector(StreamDetector):
         Logistic regression class weights (slip samples are usually rare).
     random_state : int
         Seed of the MLP.
+    calibration : {"onset", "sample"}
+        How a free threshold is chosen
+        (:class:`~slipkit.baselines.generic.OnsetCalibration`): per-recording units
+        mid-gap, or the per-sample ROC.
+    onset_frames : int or None
+        Samples from the onset that count as on time (None: the whole slip).
     threshold : float or None
-        Slip when the slip probability ``>= threshold``; None: ROC choice.
+        Slip when the slip probability ``>= threshold``; None: chosen by
+        ``calibration``.
     roc_point : {"youden", "closest"}
-        ROC point chosen when ``threshold`` is None.
+        ROC point of the per-sample ROC.
 
     Attributes
     ----------
@@ -87,6 +94,8 @@ class WindowClassifierDetector(StreamDetector):
         "hidden": [list, tuple],
         "class_weight": [StrOptions({"balanced"}), None],
         "random_state": [Interval(Integral, 0, None, closed="left")],
+        "calibration": [StrOptions({"onset", "sample"})],
+        "onset_frames": [Interval(Integral, 1, None, closed="left"), None],
     }
     n_channels: ClassVar[int | None] = None
 
@@ -101,10 +110,14 @@ class WindowClassifierDetector(StreamDetector):
         hidden: Sequence[int] = (32,),
         class_weight: str | None = "balanced",
         random_state: int = 0,
+        calibration: str = "onset",
+        onset_frames: int | None = None,
         threshold: float | None = None,
         roc_point: str = "youden",
     ) -> None:
         super().__init__(threshold=threshold, roc_point=roc_point)
+        self.calibration = calibration
+        self.onset_frames = onset_frames
         self.window = window
         self.stats = stats
         self.subtract_first = subtract_first
