@@ -266,8 +266,9 @@ class _WindowNet(ClassifierMixin, BaseEstimator):
         y : array_like of shape (n_windows,)
             Class of each window (e.g. 'linear' / 'rotational').
         groups : array_like of shape (n_windows,), optional
-            Trial of each window: the validation rows are whole trials, so
-            overlapping windows of one trial never sit on both sides.
+            Group of each window (its trial, or its object under a by-object
+            split): the validation rows are whole groups, so overlapping windows
+            of one trial never sit on both sides.
 
         Returns
         -------

@@ -122,18 +122,18 @@ class WindowStatistics(TransformerMixin, BaseEstimator):
         -------
         self
         """
-        X = validate_data(self, X, dtype=np.float64)
+        Xa = np.asarray(validate_data(self, X, dtype=np.float64))
         unknown = [s for s in self.stats if s not in STATS]
         if unknown or not len(self.stats):
             raise ValueError(
                 f"stats must be a non-empty subset of {STATS}; got {list(self.stats)}"
             )
-        if X.shape[1] % self.n_channels:
+        if Xa.shape[1] % self.n_channels:
             raise ValueError(
-                f"{X.shape[1]} inputs per window is not a multiple of "
+                f"{Xa.shape[1]} inputs per window is not a multiple of "
                 f"n_channels={self.n_channels}; set n_channels to the stream's channel count"
             )
-        self.width_ = X.shape[1] // self.n_channels
+        self.width_ = Xa.shape[1] // self.n_channels
         self.n_features_out_ = len(self.stats) * self.n_channels
         return self
 
@@ -150,8 +150,8 @@ class WindowStatistics(TransformerMixin, BaseEstimator):
         """
         check_is_fitted(self)
         # reset=False: keep n_features_in_ from fit, only check the shape.
-        X = validate_data(self, X, reset=False, dtype=np.float64)
-        v = X.reshape(len(X), self.width_, self.n_channels)
+        Xa = np.asarray(validate_data(self, X, reset=False, dtype=np.float64))
+        v = Xa.reshape(len(Xa), self.width_, self.n_channels)
         if self.subtract_first:
             v = v - v[:, :1]
         return window_statistics(v, tuple(self.stats))

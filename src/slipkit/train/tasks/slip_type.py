@@ -252,6 +252,8 @@ class WindowClassification(Task):
     #: selection score, or a group k-fold of the fixed model): what a sweep may optimise
     objective = "validation.balanced_accuracy"
     direction = "maximize"
+    #: (step, steps) of the progress lines on stderr, set at the start of each fit
+    _phase_counter: tuple[int, int] = (1, 1)
 
     def __init__(
         self,
