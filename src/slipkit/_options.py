@@ -118,6 +118,17 @@ TEXT = Rule(
     ),
 )
 PATH = Rule("a path", TEXT.accept, required=True)
+#: a run / evaluation / bundle name becomes one folder under its parent (``runs/<name>``):
+#: ``name=../..`` or ``name=/abs`` would put it anywhere (slipkit._files.check_plain_name)
+NAME = Rule(
+    "a plain folder name (no '/', '\\', '..' or leading '.')",
+    lambda v: (
+        TEXT.accept(v)
+        and not any(c in str(v) for c in "/\\")
+        and not str(v).startswith(".")
+        and str(v) == str(v).strip()
+    ),
+)
 RATE = number(positive=True)
 SEEDS = Rule(
     f"a non-empty list of whole numbers in [0, {MAX_SEED}]",
@@ -142,18 +153,18 @@ OPTIONS: dict[str, dict[str, Rule]] = {
         "summary": FLAG,
     },
     "train": {
-        "name": TEXT,
+        "name": NAME,
         "seed": SEED,
         "runs_dir": TEXT,
         "run_dir": TEXT.null(),
         "overwrite": FLAG,
     },
-    "evaluate": {"run": PATH, "dataset": PATH, "name": TEXT.null()},
+    "evaluate": {"run": PATH, "dataset": PATH, "name": NAME.null()},
     "export": {
         "run": PATH,
         "out": TEXT.null(),
         "exports_dir": TEXT,
-        "name": TEXT.null(),
+        "name": NAME.null(),
         "overwrite": FLAG,
         "opset": whole(17, 18),
         "debounce_k": COUNT.null(),
@@ -167,6 +178,7 @@ OPTIONS: dict[str, dict[str, Rule]] = {
         "session.max_frames": COUNT,
     },
     "compare": {
+        "comparison.name": NAME,
         "seed": SEED,
         "runs_dir": TEXT,
         "out": TEXT.null(),

@@ -129,6 +129,13 @@ MALFORMED: list[tuple[list[str], str]] = [
     # train
     (["train", "experiment=nope"], "Could not find 'experiment/nope'; available: "),
     (["train", "seed=-1"], "seed=-1: expected a whole number in [0, 4294967295]"),
+    # a run name is one folder under runs_dir: no escaping it
+    (["train", "name=../../x"], "name=../../x: expected a plain folder name"),
+    (["train", "name=/abs/x"], "name=/abs/x: expected a plain folder name"),
+    (
+        ["compare", "comparison=fsr", "comparison.name=../x"],
+        "comparison.name=../x: expected a plain folder name",
+    ),
     (
         ["train", "seed=4294967296"],
         "seed=4294967296: expected a whole number in [0, 4294967295]",
