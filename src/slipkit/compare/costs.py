@@ -17,6 +17,7 @@ here: its cost row says why it could not be exported.
 from __future__ import annotations
 
 import contextlib
+import functools
 import io
 import logging
 import math
@@ -60,7 +61,9 @@ class FitTimer:
             finally:
                 self.calls.append(time.perf_counter() - start)
 
-        timed.__doc__ = getattr(inherited, "__doc__", None)
+        # update_wrapper sets __wrapped__: inspect.signature(est.fit) still shows the
+        # real parameters (a task passes groups= only to a fit that takes them).
+        functools.update_wrapper(timed, inherited)
         cls.fit = timed  # type: ignore[attr-defined]
         try:
             yield self
