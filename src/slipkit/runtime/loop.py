@@ -335,9 +335,11 @@ class StreamLoop:
         self._session = bundle.session
         self._binding: ort.IOBinding | None = None
         probe = np.asarray(self._session.run(self._out_names, self._feed)[0])
-        self._is_slip = np.zeros(max(probe.size, 1), dtype=bool)
-        if self._argmax:
-            self._is_slip[self._slip_cols[self._slip_cols < probe.size]] = True
+        # A tuple of Python bools: indexing it is cheaper than a numpy array per call.
+        self._is_slip = tuple(
+            self._argmax and c in set(self._slip_cols.tolist())
+            for c in range(max(probe.size, 1))
+        )
         if io_binding:
             self._out = np.empty_like(probe)
             self._binding = self._session.io_binding()
@@ -494,17 +496,20 @@ class StreamLoop:
             self._session.run_with_iobinding(self._binding)
             score = self._out
         if self._argmax:
-            # max propagates a NaN; a NaN elsewhere would steer argmax, so all finite.
-            s = float(
-                score.flat[self._col]
-                if self._one_slip_col
-                else score.flat[self._slip_cols].max()
-            )
+            # argmax returns the first NaN when there is one: a finite top entry
+            # means every entry is finite.
             cls = int(score.argmax())
-            if not (math.isfinite(s) and math.isfinite(float(score.flat[cls]))):
+            top = float(score.flat[cls])
+            if not math.isfinite(top):
                 self._skip_nonfinite()
                 return None
-            slip = bool(self._is_slip[cls])
+            slip = self._is_slip[cls]
+            # The score: the largest slip-class entry (the top one when slip; the
+            # fancy-indexed max costs ~1.5 us, so only when it is not).
+            if self._one_slip_col:
+                s = float(score.flat[self._col])
+            else:
+                s = top if slip else float(score.flat[self._slip_cols].max())
         else:
             s = float(score.flat[self._col])
             if not math.isfinite(s):
