@@ -399,3 +399,18 @@ def test_budget_source_and_provenance_load(case: LinearCase) -> None:
     case.edit_manifest(edit)
     m = load_bundle(case.path).manifest
     assert ("data_rate_hz", True) == (m.budget.source, m.training["refit_on_all_data"])
+
+
+def test_edited_slip_classes_break_the_digest(tmp_path: Path) -> None:
+    """Dropping a slip class from a signed manifest (not re-signed) is refused at manifest_sha256."""
+    from tests.runtime.helpers import dos_like_bundle, edit_manifest
+
+    bundle = dos_like_bundle(tmp_path)
+    edit_manifest(
+        bundle,
+        lambda m: m["decision"].__setitem__("slip_classes", ["n"]),
+        resign=False,
+    )
+    with pytest.raises(BundleError) as info:
+        load_bundle(bundle)
+    assert "manifest_sha256" == info.value.field
