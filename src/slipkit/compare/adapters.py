@@ -15,7 +15,9 @@ Unified columns (:data:`ROW_COLUMNS`; a missing one is NaN):
   class);
 * event level: ``delay_ms`` (median detection delay from the true slip onset, ms),
   ``missed`` (slips never detected), ``n_slips``, ``false_alarms_per_min`` (alarms
-  per minute of non-slip data);
+  per minute of non-slip data), ``disturbances`` (test disturbances: bumps, knocks
+  with no slip, where the task's data marks them) and ``alarms_per_disturbance``
+  (the fraction of them the estimator fired in; NaN where the data marks none);
 * regression: ``rmse`` and ``smse`` (means over axes) and ``rmse_<axis>``,
   ``smse_<axis>`` per axis (force N; SlipTack speed mm/s or acceleration m/s^2);
 * the window: ``window_frames`` and ``window_ms`` (sensor frames the estimator reads
@@ -51,6 +53,8 @@ ROW_COLUMNS = (
     "missed",
     "n_slips",
     "false_alarms_per_min",
+    "disturbances",
+    "alarms_per_disturbance",
     "rmse",
     "smse",
     "window_frames",
@@ -372,6 +376,13 @@ def adapt_detection(view: RunView) -> Evaluation:
         event_tnr=_num(ev.get("tnr")),
         event_auc=_num(ev.get("auc")),
     )
+    dist = test.get("disturbances")
+    if dist:
+        n_dist = int(dist["n"])
+        row["disturbances"] = n_dist
+        row["alarms_per_disturbance"] = (
+            int(dist["fired"]) / n_dist if n_dist else math.nan
+        )
     window = _detector_window(view.model)
     row.update(
         window_frames=window,

@@ -86,7 +86,14 @@ def _train_config(
 ) -> DictConfig:
     """The ``slipkit train`` config of one estimator of the comparison."""
     task = dict(comp["task"])
-    task.update((comp.get("task_overrides") or {}).get(est) or {})
+    override = dict((comp.get("task_overrides") or {}).get(est) or {})
+    if override.get("_target_") and override["_target_"] != task.get("_target_"):
+        # A whole task of another class (e.g. the stream-detection task of an analytic
+        # TacTip detector beside the frame task of the SVMs): it replaces the family's
+        # task; the checked split (by trial, same seed and test_size) stays shared.
+        task = override
+    else:
+        task.update(override)
     cfg = OmegaConf.create(
         {
             "name": f"{comp['name']}-{est}",

@@ -29,6 +29,8 @@ MAIN = (
     ("delay_ms", "delay (ms, median)", "{:.1f}"),
     ("missed", "missed", "{:.0f}"),
     ("false_alarms_per_min", "false alarms / min", "{:.2f}"),
+    ("disturbances", "disturbances", "{:.0f}"),
+    ("alarms_per_disturbance", "alarms / disturbance", "{:.2f}"),
 )
 #: the window tasks' controls beside the headline (columns from adapters._window_controls)
 CONTROLS = (
