@@ -159,6 +159,7 @@ def test_stream_detector_comparison_exports(tmp_path: Path) -> None:
     cfg = _compose(
         [
             "comparison=fsr",
+            "scene@comparison.scene=fsr_probe_slide",  # one wiring: every detector exports
             "comparison.dataset.n_trials=2",
             f"out={out}",
             "cost.max_frames=200",
@@ -166,9 +167,9 @@ def test_stream_detector_comparison_exports(tmp_path: Path) -> None:
     )
     compare_main(cfg)
     df = pd.read_csv(out / "metrics.csv")
-    assert 3 == len(df)
-    assert ["ok"] * 3 == df["export"].tolist()
-    assert [50.0] * 3 == df["budget_p99_us"].round(6).tolist()
+    assert 4 == len(df)
+    assert ["ok"] * 4 == df["export"].tolist()
+    assert [50.0] * 4 == df["budget_p99_us"].round(6).tolist()
     assert True == bool(np.isfinite(df["roc_auc"]).all())  # noqa: E712
     assert {"roc.png", "latency.png", "delays.png", "pareto.png"} <= {
         p.name for p in out.glob("*.png")

@@ -46,3 +46,16 @@ def test_tactip_svms_beside_the_pin_motion_detector(tmp_path: Path) -> None:
     assert "learned" == kinds["svm_rbf"]
     assert ["ok"] * len(df) == df["export"].tolist()
     assert True == bool(np.isfinite(df["delay_ms"]).all())  # noqa: E712
+
+
+def test_fsr_window_classifier_beside_the_paper_detector(tmp_path: Path) -> None:
+    """FSR (hard scene): a learned window classifier beside the analytic detectors, disturbances counted."""
+    df = _run(tmp_path, "fsr", ["comparison.dataset.n_trials=4"])
+    kinds = dict(zip(df["estimator"], df["kind"], strict=True))
+    assert "learned" == kinds["window_logreg"]
+    assert "analytic" == kinds["fsr_robust"]
+    assert "analytic" == kinds["fsr_paper"]
+    assert True == bool((df["disturbances"] > 0).all())  # noqa: E712
+    assert True == bool(df["alarms_per_disturbance"].between(0, 1).all())  # noqa: E712
+    exports = dict(zip(df["estimator"], df["export"], strict=True))
+    assert "ok" == exports["window_logreg"]
