@@ -59,3 +59,17 @@ def test_fsr_window_classifier_beside_the_paper_detector(tmp_path: Path) -> None
     assert True == bool(df["alarms_per_disturbance"].between(0, 1).all())  # noqa: E712
     exports = dict(zip(df["estimator"], df["export"], strict=True))
     assert "ok" == exports["window_logreg"]
+
+
+def test_biotac_slip_window_classifier_beside_the_analytic_detectors(
+    tmp_path: Path,
+) -> None:
+    """BioTac slip (hard lift): a learned pac window classifier beside pressure and force-derivative rules."""
+    df = _run(tmp_path, "biotac_slip", ["comparison.dataset.n_trials=4"])
+    kinds = dict(zip(df["estimator"], df["kind"], strict=True))
+    assert {
+        "pressure_vibration": "analytic",
+        "force_derivative": "analytic",
+        "window_logreg": "learned",
+    } == kinds
+    assert True == bool(np.isfinite(df["roc_auc"]).all())  # noqa: E712
