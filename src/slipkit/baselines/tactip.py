@@ -42,7 +42,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_array
 
 from slipkit.baselines.base import FloatArray, StreamDetector
-from slipkit.baselines.generic import OnsetCalibration
+from slipkit.baselines.generic import OnsetCalibration, RingStream
 
 #: Smallest reference displacement (mm) the reversal divides by: below it the
 #: reference has no direction and the score is 0 (no evidence of a reversal).
@@ -207,37 +207,18 @@ class PinMotionDetector(OnsetCalibration, StreamDetector):
             out[c - 1 :] = np.lib.stride_tricks.sliding_window_view(r, c).min(axis=1)
         return out
 
-    def _new_stream(self) -> PinMotionStream:
-        return PinMotionStream(self)
+    @property
+    def window_samples(self) -> int:
+        """Frames one score reads (:class:`~slipkit.baselines.generic.RingStream`)."""
+        return self.window
 
-
-class PinMotionStream:
-    """Frame-by-frame :class:`PinMotionDetector`: a ring of the last ``window`` frames."""
-
-    def __init__(self, detector: PinMotionDetector) -> None:
-        self._detector = detector
-        self._w = detector.window
-        self._threshold = float(detector.threshold_)
-        self.reset()
-
-    def reset(self) -> None:
-        """Forget the recording."""
-        self._ring: list[FloatArray] = []
-
-    def update(self, sample: ArrayLike) -> tuple[float, bool]:
-        """Feed one pin frame (2 N,) in mm; return (score in mm/frame, slip)."""
-        self._ring.append(np.asarray(sample, dtype=np.float64).reshape(-1))
-        if len(self._ring) > self._w:
-            self._ring.pop(0)
-        if len(self._ring) < self._w:
-            return -np.inf, False
-        score = float(self._detector._scores(np.stack(self._ring))[-1])
-        return score, score >= self._threshold
+    def _new_stream(self) -> RingStream:
+        # frame by frame: a ring of the last ``window`` frames, scored by the batch code
+        return RingStream(self)
 
 
 __all__ = [
     "MIN_REFERENCE_MM",
     "PinMotionDetector",
-    "PinMotionStream",
     "mean_displacement",
 ]
