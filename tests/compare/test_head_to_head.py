@@ -6,9 +6,11 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pytest
 from hydra import compose, initialize_config_dir
 
 from slipkit import config_dir
+from slipkit.baselines.window_energy import ElectrodeEnergyClassifier
 from slipkit.compare.commands import compare_main
 
 
@@ -73,3 +75,44 @@ def test_biotac_slip_window_classifier_beside_the_analytic_detectors(
         "window_logreg": "learned",
     } == kinds
     assert True == bool(np.isfinite(df["roc_auc"]).all())  # noqa: E712
+
+
+def test_electrode_energy_tells_motion_from_touch() -> None:
+    """Windows whose electrodes keep changing are motion (the most frequent one), still ones touch."""
+    rng = np.random.default_rng(0)
+    width, channels = 5, 3
+    still = 100.0 + 0.1 * rng.standard_normal((20, width, channels))
+    ramp = np.arange(width)[None, :, None] * rng.uniform(2.0, 4.0, (20, 1, channels))
+    moving = 100.0 + ramp + 0.1 * rng.standard_normal((20, width, channels))
+    X = np.concatenate([still, moving]).reshape(40, -1)
+    y = np.array(["t"] * 20 + ["n"] * 14 + ["e"] * 6)
+    clf = ElectrodeEnergyClassifier(n_channels=channels).fit(X, y)
+    assert ["t"] * 20 + ["n"] * 20 == clf.predict(X).tolist()
+    assert ["e", "n", "t"] == clf.classes_.tolist()
+
+
+@pytest.mark.slow
+@pytest.mark.realdata
+def test_dos_real_energy_floor_beside_a_learned_window_model(
+    shared_data: Path, tmp_path: Path
+) -> None:
+    """BioTacSP-DoS: the analytic energy classifier runs through the same window task as a learned model."""
+    if not (shared_data / "biotacsp-dos").is_dir():
+        pytest.skip("biotacsp-dos is not among the real recordings")
+    df = _run(
+        tmp_path,
+        "dos_real",
+        [
+            f"comparison.dataset.raw={shared_data / 'biotacsp-dos'}",
+            "~comparison.estimators.window_select",
+            "~comparison.estimators.window_gru",
+            "comparison.estimators.window_mlp.max_epochs=2",
+            "comparison.task.folds=2",
+            "comparison.task.dynamics=null",
+            "comparison.task.first_frame_control=false",
+        ],
+    )
+    kinds = dict(zip(df["estimator"], df["kind"], strict=True))
+    assert {"window_mlp": "learned", "energy": "analytic"} == kinds
+    exports = dict(zip(df["estimator"], df["export"], strict=True))
+    assert True == exports["energy"].startswith("not exportable")  # noqa: E712
