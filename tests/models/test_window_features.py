@@ -142,3 +142,23 @@ def test_parallel_inner_folds_give_the_same_record():
     serial = CandidateSearch(**kw).fit(X, y, groups=g)
     parallel = CandidateSearch(**kw, n_jobs=2).fit(X, y, groups=g)
     assert serial.selection_ == parallel.selection_
+
+
+def test_a_list_of_grids_tries_each_sub_grid():
+    """grids may list sub-grids (ParameterGrid's list form): their pairs, in order."""
+    X, y, g = grouped_problem()
+    search = CandidateSearch(
+        candidates={"lr": make_pipeline(StandardScaler(), LogisticRegression())},
+        grids={
+            "lr": [
+                {"logisticregression__C": [0.1, 1.0]},
+                {"logisticregression__C": [10.0], "standardscaler": ["passthrough"]},
+            ]
+        },
+        verbose=False,
+    ).fit(X, y, groups=g)
+    assert [
+        {"logisticregression__C": 0.1},
+        {"logisticregression__C": 1.0},
+        {"logisticregression__C": 10.0, "standardscaler": "passthrough"},
+    ] == [c["params"] for c in search.selection_["candidates"]]

@@ -81,10 +81,11 @@ class CandidateSearch(ClassifierMixin, BaseEstimator):
     candidates : mapping of str to estimator
         Named candidates, in the order they are tried (ties go to the earlier one:
         list the cheaper first).
-    grids : mapping of str to mapping, optional
+    grids : mapping of str to mapping or list of mappings, optional
         ``{name: {param: [values]}}``: each candidate's grid (``ParameterGrid``
-        syntax; nested names such as ``clf__C`` for Pipelines). A candidate without
-        a grid is tried with its own parameters.
+        syntax, a list of mappings for several sub-grids; nested names such as
+        ``clf__C`` for Pipelines). A candidate without a grid is tried with its own
+        parameters.
     cv : "leave-one-group-out" or int
         Leave one group out, or ``GroupKFold`` with this many folds.
     scoring : str
@@ -121,7 +122,7 @@ class CandidateSearch(ClassifierMixin, BaseEstimator):
 
     _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
         "candidates": [Mapping],
-        "grids": [Mapping, None],
+        "grids": [Mapping, None],  # values: a mapping or a list of mappings
         "cv": [
             StrOptions({"leave-one-group-out"}),
             Interval(Integral, 2, None, closed="left"),
@@ -162,7 +163,9 @@ class CandidateSearch(ClassifierMixin, BaseEstimator):
         pairs = []
         for name in self.candidates:
             grid = grids.get(name)
-            params = list(ParameterGrid(dict(grid))) if grid else [{}]
+            # a mapping is one grid; a list of mappings is several (ParameterGrid's forms)
+            spec: Any = [dict(g) for g in grid] if isinstance(grid, list) else grid
+            params = list(ParameterGrid(spec)) if grid else [{}]
             pairs += [(str(name), dict(p)) for p in params]
         return pairs
 
