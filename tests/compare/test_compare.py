@@ -145,8 +145,10 @@ def test_detector_comparison_and_unexportable_row(tmp_path: Path) -> None:
     cfg = _compose(["comparison=davis", "comparison.dataset.n_trials=4", f"out={out}"])
     compare_main(cfg)
     df = pd.read_csv(out / "metrics.csv")
-    assert ["polarity_lines", "polarity_square"] == df["estimator"].tolist()
-    assert ["analytic", "analytic"] == df["kind"].tolist()
+    assert ["polarity_lines", "polarity_square", "event_logreg"] == df[
+        "estimator"
+    ].tolist()
+    assert ["analytic", "analytic", "learned"] == df["kind"].tolist()
     assert True == bool(df["export"].str.startswith("not exportable").all())  # noqa: E712
     assert True == bool(np.isfinite(df["f1"]).all())  # noqa: E712
     assert (out / "delays.png").is_file()

@@ -12,6 +12,7 @@ from hydra import compose, initialize_config_dir
 from slipkit import config_dir
 from slipkit.baselines.window_energy import ElectrodeEnergyClassifier
 from slipkit.compare.commands import compare_main
+from slipkit.models.events import EventFrameClassifier
 
 
 def _run(tmp_path: Path, family: str, overrides: list[str]) -> pd.DataFrame:
@@ -116,3 +117,33 @@ def test_dos_real_energy_floor_beside_a_learned_window_model(
     assert {"window_mlp": "learned", "energy": "analytic"} == kinds
     exports = dict(zip(df["estimator"], df["export"], strict=True))
     assert True == exports["energy"].startswith("not exportable")  # noqa: E712
+
+
+def test_event_frame_classifier_learns_the_positive_edge() -> None:
+    """Frames dominated by positive (contact-lost) events inside the labelled span are called slip."""
+    rng = np.random.default_rng(0)
+    rows = []
+    for f in range(20):  # 20 ms frames; slip from 0.2 s: many positive events
+        n_pos, n_neg = (40, 5) if f >= 10 else (5, 5)
+        for sign, n in ((1.0, n_pos), (-1.0, n_neg)):
+            t = f * 0.02 + rng.uniform(0, 0.02, n)
+            xy = rng.integers(0, 50, (n, 2))
+            rows.append(np.column_stack([t, xy, np.full(n, sign)]))
+    ev = np.concatenate(rows)
+    ev = ev[np.argsort(ev[:, 0], kind="stable")]
+    clf = EventFrameClassifier().fit(ev, onsets=[0.2], ends=[np.inf])
+    assert [False] * 10 + [True] * 10 == clf.frames(ev)["slip"].tolist()
+
+
+@pytest.mark.slow  # ~20 s under load; test_compare's DAVIS test runs the same rows by default
+def test_davis_learned_frames_beside_the_polarity_rule(tmp_path: Path) -> None:
+    """DAVIS (hard release): the event-frame logistic regression and the polarity rule share the bins."""
+    df = _run(tmp_path, "davis", ["comparison.dataset.n_trials=4"])
+    kinds = dict(zip(df["estimator"], df["kind"], strict=True))
+    assert {
+        "polarity_lines": "analytic",
+        "polarity_square": "analytic",
+        "event_logreg": "learned",
+    } == kinds
+    assert True == bool(df["export"].str.startswith("not exportable").all())  # noqa: E712
+    assert True == bool(np.isfinite(df["f1"]).all())  # noqa: E712

@@ -222,6 +222,7 @@ def _task_needs(task: Any) -> tuple[tuple[type, ...], tuple[type, ...], str] | N
     from slipkit.baselines.base import StreamDetector
     from slipkit.baselines.davis import DavisPolarity
     from slipkit.baselines.sliptack import DropAcceleration, StickSlipSpeed
+    from slipkit.models.events import EventFrameClassifier
     from slipkit.train.tasks.davis import DavisRelease
     from slipkit.train.tasks.detection import StreamDetection
     from slipkit.train.tasks.force import FingerDirection, ForceRegression
@@ -240,9 +241,9 @@ def _task_needs(task: Any) -> tuple[tuple[type, ...], tuple[type, ...], str] | N
         ),
         (
             DavisRelease,
-            (DavisPolarity,),
+            (DavisPolarity, EventFrameClassifier),
             (),
-            "runs the DAVIS event-polarity detector",
+            "runs a DAVIS event-frame detector (the polarity rule or a learned one)",
         ),
         (SlipTackSpeed, (StickSlipSpeed,), (), "runs the SlipTack speed estimator"),
         (SlipTackAccel, (DropAcceleration,), (), "runs the SlipTack drop estimator"),

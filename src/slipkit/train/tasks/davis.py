@@ -12,6 +12,7 @@ every number comes from the held-out ones.
 
 from __future__ import annotations
 
+import inspect
 import logging
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -101,6 +102,24 @@ class DavisRelease(Task):
         if not tables:
             return np.empty((0, 4)), np.empty(0, dtype=int)
         return np.concatenate(tables), np.concatenate(segs)
+
+    def _truth_spans(self, dataset: Dataset) -> tuple[np.ndarray, np.ndarray]:
+        """Slip onset and end of contact (s) of every trial, as scored (``inf``: no slip)."""
+        onsets, ends = [], []
+        for trial in dataset:
+            onset = float(trial.labels.get(self.label, np.inf))
+            truth = trial.streams.get(self.truth_stream)
+            if not np.isfinite(onset) or truth is None:
+                onsets.append(np.inf)
+                ends.append(np.inf)
+                continue
+            onsets.append(onset)
+            ends.append(
+                contact_end(
+                    truth["t"].to_numpy(), truth[self.area_column].to_numpy(), onset
+                )
+            )
+        return np.asarray(onsets), np.asarray(ends)
 
     def trial_table(
         self, model: Any, dataset: Dataset
@@ -192,7 +211,12 @@ class DavisRelease(Task):
         split = split_by_trial(dataset, test_size=self.test_size, seed=seed)
         train, _, test = split.apply(dataset)
         X, seg = self._events_xy(train)
-        model.fit(X, segments=seg)  # checks parameters and events; the rule is fixed
+        if "onsets" in inspect.signature(model.fit).parameters:
+            # A learned estimator (slipkit.models.events): the scoring truth per recording.
+            onsets, ends = self._truth_spans(train)
+            model.fit(X, segments=seg, onsets=onsets, ends=ends)
+        else:  # the rule: fit checks parameters and events, nothing is learned
+            model.fit(X, segments=seg)
         table, frames = self.trial_table(model, test)
         table.to_csv(out / "davis_trials.csv", index=False)
         frames.to_csv(out / "test_frames.csv", index=False)
