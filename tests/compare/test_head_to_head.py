@@ -13,6 +13,7 @@ from slipkit import config_dir
 from slipkit.baselines.window_energy import ElectrodeEnergyClassifier
 from slipkit.compare.commands import compare_main
 from slipkit.models.events import EventFrameClassifier
+from slipkit.models.spectral import SpectralSpeedRegressor
 
 
 def _run(tmp_path: Path, family: str, overrides: list[str]) -> pd.DataFrame:
@@ -147,3 +148,42 @@ def test_davis_learned_frames_beside_the_polarity_rule(tmp_path: Path) -> None:
     } == kinds
     assert True == bool(df["export"].str.startswith("not exportable").all())  # noqa: E712
     assert True == bool(np.isfinite(df["f1"]).all())  # noqa: E712
+
+
+def test_spectral_regressor_learns_speed_from_the_vibration_frequency() -> None:
+    """Speeds proportional to the vibration frequency are learned and held between hops (mm/s)."""
+    rate, n = 1000.0, 1500
+    t = np.arange(n) / rate
+    xs, ys, segs = [], [], []
+    for i, f in enumerate([20.0, 30.0, 40.0, 50.0, 60.0, 70.0]):
+        xs.append(np.sin(2 * np.pi * f * t))
+        ys.append(np.full(n, f / 2))  # speed (mm/s) = f / 2
+        segs.append(np.full(n, i))
+    reg = SpectralSpeedRegressor(window=400, hop=50, model="ridge", alpha=1e-3)
+    reg.fit(
+        np.concatenate(xs)[:, None], np.concatenate(ys), segments=np.concatenate(segs)
+    )
+    pred = reg.predict(np.sin(2 * np.pi * 45.0 * t)[:, None])
+    assert True == bool(np.isnan(pred[:399]).all())  # noqa: E712 - before the first window
+    assert 22.5 == pytest.approx(float(np.median(pred[399:])), abs=2.0)
+
+
+@pytest.mark.slow  # ~35 s under load (a 1 s spectrum every 50 ms on every pull)
+def test_sliptack_spectral_regressor_beside_the_analytic_inversion(
+    tmp_path: Path,
+) -> None:
+    """SlipTack (hard pull): the learned spectral regressor beside eq. 3 inverted, not exportable."""
+    df = _run(
+        tmp_path,
+        "sliptack",
+        [
+            "comparison.dataset.n_trials=6",
+            "~comparison.estimators.paper_form",
+            "~comparison.estimators.calibrated",
+        ],
+    )
+    kinds = dict(zip(df["estimator"], df["kind"], strict=True))
+    assert {"exact": "analytic", "spectral_gbr": "learned"} == kinds
+    exports = dict(zip(df["estimator"], df["export"], strict=True))
+    assert True == exports["spectral_gbr"].startswith("not exportable")  # noqa: E712
+    assert True == bool(np.isfinite(df["rmse"]).all())  # noqa: E712

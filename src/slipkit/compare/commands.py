@@ -223,6 +223,7 @@ def _task_needs(task: Any) -> tuple[tuple[type, ...], tuple[type, ...], str] | N
     from slipkit.baselines.davis import DavisPolarity
     from slipkit.baselines.sliptack import DropAcceleration, StickSlipSpeed
     from slipkit.models.events import EventFrameClassifier
+    from slipkit.models.spectral import SpectralSpeedRegressor
     from slipkit.train.tasks.davis import DavisRelease
     from slipkit.train.tasks.detection import StreamDetection
     from slipkit.train.tasks.force import FingerDirection, ForceRegression
@@ -245,7 +246,12 @@ def _task_needs(task: Any) -> tuple[tuple[type, ...], tuple[type, ...], str] | N
             (),
             "runs a DAVIS event-frame detector (the polarity rule or a learned one)",
         ),
-        (SlipTackSpeed, (StickSlipSpeed,), (), "runs the SlipTack speed estimator"),
+        (
+            SlipTackSpeed,
+            (StickSlipSpeed, SpectralSpeedRegressor),
+            (),
+            "runs a SlipTack speed estimator (eq. 3 inverted or a learned spectral one)",
+        ),
         (SlipTackAccel, (DropAcceleration,), (), "runs the SlipTack drop estimator"),
         (
             WindowClassification,

@@ -437,6 +437,12 @@ def export_stick_slip_speed(
         float32, :data:`~slipkit.export.detectors.NO_SCORE` where the estimator gives
         NaN; ``hop`` the estimator's, ``first_decision = window - 1``.
     """
+    if not isinstance(estimator, StickSlipSpeed):
+        # e.g. the learned slipkit.models.spectral regressor: its graph is not eq. 3's
+        raise ExportError(
+            f"no ONNX graph for a {type(estimator).__name__} speed estimator: only "
+            "StickSlipSpeed (eq. 3 inverted) exports"
+        )
     check_is_fitted(estimator, "stick_length_m_")
     if estimator.normal_force != "value":
         raise ExportError(
