@@ -250,7 +250,7 @@ def _task_needs(task: Any) -> tuple[tuple[type, ...], tuple[type, ...], str] | N
             SlipTackSpeed,
             (StickSlipSpeed, SpectralSpeedRegressor),
             (),
-            "runs a SlipTack speed estimator (eq. 3 inverted or a learned spectral one)",
+            "runs the SlipTack speed estimator (eq. 3 inverted) or a learned spectral one",
         ),
         (SlipTackAccel, (DropAcceleration,), (), "runs the SlipTack drop estimator"),
         (
