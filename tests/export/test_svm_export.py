@@ -268,7 +268,9 @@ def test_in_graph_features_equal_velocity_features(
     )
 )
 @example(dxy=[(0.0, 5e-324), (1.0, 1.0)])  # a subnormal velocity (found by Hypothesis)
-@example(dxy=[(0.0, 1.0), (5e-324, 5e-324)])  # hypot rounds a subnormal: v / r is not unit
+@example(
+    dxy=[(0.0, 1.0), (5e-324, 5e-324)]
+)  # hypot rounds a subnormal: v / r is not unit
 def test_shifted_angle_is_atan2_of_cross_and_dot_with_the_mean_direction(dxy):
     """wrap(theta - circular mean) == atan2(m x v, m . v) with m the sum of unit velocities."""
     v = np.asarray(dxy, dtype=np.float64)

@@ -317,7 +317,9 @@ def test_mindlin_creep_grows_from_the_contact_edge_before_onset_and_freezes_afte
     _, x0, y0 = pins_of(bare)
     k = onset_frame(t, trial)
     dy = y - y0
-    np.testing.assert_allclose(x0, x, atol=1e-12)  # gravity is straight down: no x creep
+    np.testing.assert_allclose(
+        x0, x, atol=1e-12
+    )  # gravity is straight down: no x creep
     assert 0.0 == np.abs(dy[:k, 0]).max()  # the centre pin is in the stick zone
     assert 0.0 > dy[k - 1].min() > -amp  # edge pins creep down, at most A
     assert dy[k - 1].mean() < dy[k // 2].mean() <= 0.0  # the creep grows towards onset
