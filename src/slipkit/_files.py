@@ -469,6 +469,9 @@ def atomic_dir(
     target = Path(target)
     recover_leftovers(target)
     _check_target(target, overwrite=overwrite, kind=kind, option=None, inside=inside)
+    # the parents this write creates (runs/<name>/ for a first run): a failed write
+    # removes them again if they are still empty, so a refusal leaves nothing behind
+    created = [p for p in (target.parent, *target.parent.parents) if not p.exists()]
     target.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
     try:
@@ -484,6 +487,9 @@ def atomic_dir(
             os.replace(tmp, target)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
+        for parent in created:  # deepest first; one that holds anything stays
+            with contextlib.suppress(OSError):
+                parent.rmdir()
         raise
 
 

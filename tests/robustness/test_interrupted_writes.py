@@ -141,7 +141,7 @@ def test_train_failing_before_run_json_leaves_no_run(
     )
     with pytest.raises(OSError, match="injected"):
         train_commands.train_main(cfg)
-    assert [] == list(run.parent.iterdir())
+    assert [] == list(tmp_path.iterdir())  # not even the runs/ folder it created
     with pytest.raises(SlipkitError):
         read_run(run)
 

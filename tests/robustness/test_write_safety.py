@@ -405,6 +405,20 @@ def test_overwrite_without_a_kind_replaces_nothing(tmp_path: Path) -> None:
     assert before == _snapshot(tmp_path)
 
 
+def test_a_failed_write_removes_the_parents_it_created(tmp_path: Path) -> None:
+    """A write that fails leaves none of the empty parents it made (runs/<name>/), and keeps any that hold something."""
+    (tmp_path / "runs").mkdir()
+    (tmp_path / "runs" / "keep.txt").write_text("lab notes")
+    before = _snapshot(tmp_path)
+    with (
+        pytest.raises(RuntimeError, match="training failed"),
+        atomic_dir(tmp_path / "runs" / "name" / "2026-01-01", kind="run"),
+    ):
+        raise RuntimeError("training failed")
+    assert before == _snapshot(tmp_path)
+    assert ["keep.txt"] == sorted(p.name for p in (tmp_path / "runs").iterdir())
+
+
 def test_a_symlinked_out_is_refused(tmp_path: Path) -> None:
     """An `out` that is a symbolic link (even to a dataset) is not replaced."""
     ds = save_dataset(make_dataset(n_trials=2, n_frames=20), tmp_path / "ds")
