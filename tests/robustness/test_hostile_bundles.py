@@ -672,14 +672,15 @@ def test_junk_datagrams_do_not_keep_the_timeout_alive() -> None:
                 stop.wait(0.01)
         sent.append("exhausted")
 
-    with UdpSource("127.0.0.1", 0, (3,), timeout_s=0.3) as src:
+    # Before the first frame the wait_s clock applies (--wait), after it timeout_s.
+    with UdpSource("127.0.0.1", 0, (3,), timeout_s=0.3, wait_s=0.3) as src:
         thread = threading.Thread(target=junk, args=(src.address[1],), daemon=True)
         thread.start()
         got = _drain(src)
         still_sending = not stop.is_set() and "exhausted" not in sent
         stop.set()
         thread.join(timeout=15)
-    assert ([], True, True) == (got, src.timed_out, still_sending)
+    assert ([], True, True) == (got, src.waited_out, still_sending)
     assert 0 < src.n_rejected
 
 

@@ -6,6 +6,7 @@ import json
 import re
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -179,8 +180,75 @@ def test_udp_stream_through_the_cli(generous: LinearCase, tmp_path: Path) -> Non
         "lost": 0,
         "resyncs": 0,
         "last_error": None,
+        "ended": "frames",
     } == summary["udp"]
     assert "udp: 60 received" in stdout
+
+
+def test_udp_listener_started_before_the_sender(
+    generous: LinearCase, tmp_path: Path
+) -> None:
+    """--timeout counts from the first frame: a sender that starts later than it is heard."""
+    out = tmp_path / "late.json"
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "slipkit.runtime.cli",
+            str(generous.path),
+            "--udp",
+            "127.0.0.1:0",
+            "--timeout",
+            "0.3",
+            "--wait",
+            "30",
+            "--json",
+            str(out),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert proc.stderr is not None
+        line = proc.stderr.readline()
+        match = re.search(r"listening on udp ([\d.]+):(\d+)", line)
+        assert match, line
+        time.sleep(1.0)  # longer than --timeout: the sensor is started late
+        with UdpSender(match.group(1), int(match.group(2))) as tx:
+            tx.send_all(generous.frames[:40], generous.timestamps[:40])
+        _, stderr = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert 0 == proc.returncode, stderr
+    summary = json.loads(out.read_text())
+    assert (40, "timeout") == (summary["frames"], summary["udp"]["ended"])
+
+
+def test_udp_without_a_sender_ends_after_wait(
+    generous: LinearCase, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """No frame within --wait: exit 1, and the summary says so (stdout and JSON)."""
+    out = tmp_path / "none.json"
+    args = [str(generous.path), "--udp", "127.0.0.1:0", "--wait", "0.3"]
+    assert 1 == run([*args, "--json", str(out)])
+    assert "udp: no frame arrived within --wait 0.3 s" in capsys.readouterr().out
+    assert (0, "wait") == (
+        json.loads(out.read_text())["frames"],
+        json.loads(out.read_text())["udp"]["ended"],
+    )
+
+
+@pytest.mark.parametrize("value", ["-1", "nan", "inf"])
+def test_bad_wait_exits_2_naming_the_option(
+    generous: LinearCase, capsys: pytest.CaptureFixture[str], value: str
+) -> None:
+    """A negative, NaN or infinite --wait stops with status 2 on one line naming --wait."""
+    with pytest.raises(SystemExit) as info:
+        main([str(generous.path), "--udp", "127.0.0.1:0", f"--wait={value}"])
+    err = capsys.readouterr().err
+    assert (2, 1) == (info.value.code, len(err.splitlines()))
+    assert "slipkit-run: error: --wait: must be in [0, 86400] s" in err
 
 
 def test_check_fails_without_decisions(

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +24,7 @@ from slipkit.runtime import (
     load_bundle,
     load_replay,
 )
+from slipkit.runtime.errors import OptionError
 from slipkit.runtime.sources import HEADER_SIZE
 
 
@@ -149,3 +152,61 @@ def test_pickled_replay_is_refused(tmp_path: Path) -> None:
     np.save(tmp_path / "r.npy", np.array([{"a": 1}], dtype=object), allow_pickle=True)
     with pytest.raises(FrameError, match="without pickles"):
         load_replay(tmp_path / "r.npy", (3,), 100.0)
+
+
+def test_udp_timeout_counts_from_the_first_frame() -> None:
+    """Frames sent later than timeout_s after the listener starts are received."""
+    with (
+        UdpSource("127.0.0.1", 0, (3,), timeout_s=0.2, wait_s=30) as src,
+        UdpSender(*src.address) as tx,
+    ):
+        late = threading.Timer(0.6, tx.send_all, (frames(5), np.arange(5) / 100.0))
+        late.start()
+        got = [f.frame_index for f in src]
+        late.join()
+    assert [0, 1, 2, 3, 4] == got
+    assert (True, False) == (src.timed_out, src.waited_out)
+
+
+def test_udp_wait_ends_a_stream_that_never_starts() -> None:
+    """With no sender the stream ends after wait_s, marked waited out, not timed out."""
+    with UdpSource("127.0.0.1", 0, (3,), timeout_s=30, wait_s=0.2) as src:
+        got = list(src)
+    assert ([], True, False) == (got, src.waited_out, src.timed_out)
+
+
+@pytest.mark.parametrize("first_frame", [False, True])
+def test_udp_junk_does_not_keep_a_stream_alive(first_frame: bool) -> None:
+    """A steady stream of junk datagrams neither extends wait_s nor timeout_s."""
+    stop = threading.Event()
+    with (
+        UdpSource("127.0.0.1", 0, (3,), timeout_s=0.2, wait_s=0.2) as src,
+        UdpSender(*src.address) as tx,
+    ):
+
+        def junk() -> None:
+            for _ in range(500):  # at most ~5 s even if the source never stops
+                if stop.is_set():
+                    return
+                tx.sock.sendto(b"junk", src.address)
+                time.sleep(0.01)
+
+        if first_frame:
+            tx.send(0, 0.0, [1, 2, 3])
+        sender = threading.Thread(target=junk)
+        sender.start()
+        try:
+            got = [f.frame_index for f in src]
+        finally:
+            stop.set()
+            sender.join()
+    assert ([0] if first_frame else []) == got
+    assert (first_frame, not first_frame) == (src.timed_out, src.waited_out)
+    assert "datagram of 4 bytes" in (src.last_error or "")
+
+
+@pytest.mark.parametrize("wait_s", [-1.0, float("nan"), float("inf"), True])
+def test_udp_bad_wait_is_named(wait_s: float) -> None:
+    """A wait_s outside [0, one day] (or not a number) is refused naming wait_s."""
+    with pytest.raises(OptionError, match="wait_s"):
+        UdpSource("127.0.0.1", 0, (3,), wait_s=wait_s)

@@ -5,10 +5,11 @@ Usage::
     slipkit-run exports/tactip_svm                       # the bundle's replay.npz
     slipkit-run exports/tactip_svm --replay frames.npz --check --json out.json
     slipkit-run exports/tactip_svm --udp 127.0.0.1:9000 --frames 1000
+    slipkit-run exports/tactip_svm --udp 127.0.0.1:9000 --wait 0 --timeout 5
     slipkit-run exports/tactip_svm --choose-session      # measure session options
 
 Exit status: 0 success; 1 ``--check`` failed (p99 over the manifest's budget, or no
-decision was made); 2 a bad bundle, replay file or argument: one line on stderr,
+decision was made), or ``--udp`` and no frame arrived within ``--wait``; 2 a bad bundle, replay file or argument: one line on stderr,
 ``slipkit-run: error: ...``, naming the file and field or the option. Every deliberate
 error is a :class:`~slipkit.errors.SlipkitError`; any other exception is a bug and
 keeps its traceback. argparse, not Hydra: a gripper PC has numpy and onnxruntime only.
@@ -35,6 +36,7 @@ from slipkit.runtime.errors import FrameError, OptionError
 from slipkit.runtime.loop import StreamLoop
 from slipkit.runtime.modules import heavy_modules_loaded
 from slipkit.runtime.sources import (
+    DEFAULT_WAIT_S,
     MAX_RESYNC_AFTER,
     MAX_TIMEOUT_S,
     RESYNC_AFTER,
@@ -84,8 +86,17 @@ def _parser() -> argparse.ArgumentParser:
         type=float,
         default=2.0,
         metavar="S",
-        help="UDP: stop when no frame has been accepted for S seconds, wall clock "
-        f"(default 2; at most {MAX_TIMEOUT_S:g})",
+        help="UDP: after the first frame, stop when no frame has been accepted for S "
+        f"seconds, wall clock (default 2; at most {MAX_TIMEOUT_S:g})",
+    )
+    p.add_argument(
+        "--wait",
+        type=float,
+        default=DEFAULT_WAIT_S,
+        metavar="S",
+        help="UDP: stop (exit 1) when no frame has been accepted S seconds after "
+        f"listening starts; 0 waits forever (default {DEFAULT_WAIT_S:g}; at most "
+        f"{MAX_TIMEOUT_S:g})",
     )
     p.add_argument(
         "--resync-after",
@@ -233,6 +244,11 @@ def _check_args(args: argparse.Namespace) -> None:
         raise OptionError(
             "--timeout", f"must be in (0, {MAX_TIMEOUT_S:g}] s; got {args.timeout}"
         )
+    if not 0 <= args.wait <= MAX_TIMEOUT_S:  # False for NaN too
+        raise OptionError(
+            "--wait",
+            f"must be in [0, {MAX_TIMEOUT_S:g}] s (0: forever); got {args.wait}",
+        )
     if not 0 < args.load_deadline <= MAX_DEADLINE_S:
         raise OptionError(
             "--load-deadline",
@@ -316,6 +332,7 @@ def run(argv: Sequence[str] | None = None) -> int:
                     bundle.manifest.frame.shape,
                     max_frames=args.frames,
                     timeout_s=args.timeout,
+                    wait_s=args.wait,
                     resync_after=args.resync_after,
                 )
             except OptionError as exc:
@@ -334,6 +351,13 @@ def run(argv: Sequence[str] | None = None) -> int:
                 "lost": src.n_lost,
                 "resyncs": src.n_resyncs,
                 "last_error": src.last_error,
+                "ended": (
+                    "wait"
+                    if src.waited_out
+                    else "timeout"
+                    if src.timed_out
+                    else "frames"
+                ),
             }
         else:
             frames, times, name = _replay(bundle, args.replay)
@@ -367,6 +391,10 @@ def run(argv: Sequence[str] | None = None) -> int:
                 )
             )
         status = 1 if args.check and not out["within_budget"] else 0
+        if udp is not None and udp["ended"] == "wait":
+            # The sensor never came: a failed run whether or not --check was given.
+            print(f"udp: no frame arrived within --wait {args.wait:g} s")
+            status = 1
         if args.check:
             print(f"check: {'passed' if status == 0 else 'FAILED'}")
     if args.report_modules:

@@ -36,8 +36,10 @@ accepted as the start of a new sequence (:attr:`UdpSource.n_resyncs` counts thes
 so a sensor bridge that restarts at index 0, or one stray datagram with index
 2^64 - 1, costs ``resync_after`` frames instead of the rest of the run. A forward
 jump of more than :data:`MAX_LOST_JUMP` frames is also a resync, not that many lost
-frames. The ``timeout_s`` runs on the wall clock from the last *accepted* frame (from
-the start before the first): junk datagrams do not keep a run alive.
+frames. Two clocks bound a run, both on the wall clock and both reset by *accepted*
+frames only (junk datagrams do not keep a run alive): ``wait_s`` bounds the wait for
+the first frame (a listener is usually started before the sensor), ``timeout_s`` the
+silence after any accepted frame.
 """
 
 from __future__ import annotations
@@ -69,8 +71,10 @@ RESYNC_AFTER = 8
 MAX_RESYNC_AFTER = 1_000_000
 #: A forward index jump above this many frames is a resync, not lost frames.
 MAX_LOST_JUMP = 1 << 20
-#: Longest UDP timeout, s (one day).
+#: Longest UDP timeout or first-frame wait, s (one day).
 MAX_TIMEOUT_S = 86_400.0
+#: Default wait for the first UDP frame, s: long enough to start the sensor by hand.
+DEFAULT_WAIT_S = 30.0
 #: Largest replay array read (bytes, uncompressed): 1 GiB.
 MAX_REPLAY_BYTES = 1 << 30
 
@@ -385,8 +389,13 @@ class UdpSource(_Socket):
     max_frames : int, optional
         Stop after this many accepted frames.
     timeout_s : float
-        Stop when no frame has been *accepted* for this long, s, on the wall clock
-        (junk datagrams do not reset it); in (0, :data:`MAX_TIMEOUT_S`].
+        After the first accepted frame, stop when no frame has been *accepted* for
+        this long, s, on the wall clock (junk datagrams do not reset it); in
+        (0, :data:`MAX_TIMEOUT_S`].
+    wait_s : float
+        Stop when no frame has been accepted this long, s, after the iteration
+        started (the wait for the first frame; junk does not end it); 0 waits
+        forever; in [0, :data:`MAX_TIMEOUT_S`]. Default :data:`DEFAULT_WAIT_S`.
     resync_after : int
         Consecutive out-of-order datagrams after which the next one starts a new
         sequence (module docstring); in [1, :data:`MAX_RESYNC_AFTER`].
@@ -401,14 +410,17 @@ class UdpSource(_Socket):
         Times the index sequence was restarted (a run of ``resync_after``
         out-of-order datagrams, or a forward jump above :data:`MAX_LOST_JUMP`).
     timed_out : bool
-        The stream ended because nothing was accepted within ``timeout_s``.
+        The stream ended because nothing was accepted within ``timeout_s`` of the
+        last accepted frame.
+    waited_out : bool
+        The stream ended because no frame was accepted within ``wait_s``.
     last_error : str or None
         Why the last datagram was rejected.
 
     Raises
     ------
     OptionError
-        ``timeout_s``, ``resync_after`` or ``max_frames`` out of range, or the
+        ``timeout_s``, ``wait_s``, ``resync_after`` or ``max_frames`` out of range, or the
         address cannot be bound (naming ``host``).
     """
 
@@ -420,6 +432,7 @@ class UdpSource(_Socket):
         *,
         max_frames: int | None = None,
         timeout_s: float = 2.0,
+        wait_s: float = DEFAULT_WAIT_S,
         resync_after: int = RESYNC_AFTER,
     ) -> None:
         if not (
@@ -429,6 +442,15 @@ class UdpSource(_Socket):
         ):
             raise OptionError(
                 "timeout_s", f"must be in (0, {MAX_TIMEOUT_S:g}] s; got {timeout_s!r}"
+            )
+        if not (
+            isinstance(wait_s, int | float)
+            and not isinstance(wait_s, bool)
+            and 0 <= wait_s <= MAX_TIMEOUT_S  # False for NaN too
+        ):
+            raise OptionError(
+                "wait_s",
+                f"must be in [0, {MAX_TIMEOUT_S:g}] s (0: forever); got {wait_s!r}",
             )
         if not (
             isinstance(resync_after, int)
@@ -447,6 +469,7 @@ class UdpSource(_Socket):
         self.n_values = math.prod(self.frame_shape)
         self.max_frames = max_frames
         self.timeout_s = float(timeout_s)
+        self.wait_s = float(wait_s)
         self.resync_after = resync_after
         if not isinstance(port, int) or not 0 <= port <= 65535:
             raise OptionError("port", f"must be an integer in [0, 65535]; got {port!r}")
@@ -470,8 +493,14 @@ class UdpSource(_Socket):
             self._buf, dtype="<f4", count=self.n_values, offset=HEADER_SIZE
         ).reshape(self.frame_shape)
         self.n_received = self.n_rejected = self.n_lost = self.n_resyncs = 0
-        self.timed_out = False
+        self.timed_out = self.waited_out = False
         self.last_error: str | None = None
+
+    def _expire(self) -> None:
+        if self.n_received:
+            self.timed_out = True
+        else:
+            self.waited_out = True
 
     def _reject(self, problem: str) -> None:
         self.n_rejected += 1
@@ -482,19 +511,23 @@ class UdpSource(_Socket):
         settimeout, now = self.sock.settimeout, time.monotonic
         last = -1
         out_of_order = 0  # consecutive well-formed datagrams with an index <= last
-        deadline = now() + self.timeout_s
+        # Before the first accepted frame the deadline is ``wait_s`` from the start
+        # (None: forever), after it ``timeout_s`` from the last accepted frame; both on
+        # the wall clock, so a stream of junk datagrams cannot keep the run alive.
+        deadline = None if self.wait_s == 0 else now() + self.wait_s
         while self.max_frames is None or self.n_received < self.max_frames:
-            # The timeout runs from the last accepted frame on the wall clock: a
-            # stream of junk datagrams must not keep the run alive.
-            left = deadline - now()
-            if left <= 0:
-                self.timed_out = True
-                return
-            settimeout(left)
+            if deadline is not None:
+                left = deadline - now()
+                if left <= 0:
+                    self._expire()
+                    return
+                settimeout(left)
+            else:
+                settimeout(None)
             try:
                 n = recv_into(buf)
             except TimeoutError:
-                self.timed_out = True
+                self._expire()
                 return
             arrival = clock()
             if n != self.expected:
