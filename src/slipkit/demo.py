@@ -9,8 +9,10 @@ Stages, each with a progress bar:
    learned models are trained and the analytic baselines calibrated on the same split,
    exported and timed (:func:`slipkit.compare.commands.run_comparison`) into
    ``<out>/compare/<family>``;
-4. **export** the best estimator of each family (the comparison's verdict: highest
-   score among the exported ones within budget) to ``<out>/exports/<family>``;
+4. **export** the best estimator of each family (the comparison's verdict,
+   :func:`slipkit.compare.table.choose_deploy`: highest score among the exported ones whose
+   p99 meets the budget; when none does, the best-scoring one, marked not recommended)
+   to ``<out>/exports/<family>``;
 5. **replay** that bundle's held-out test frames through the runtime loop
    (:class:`slipkit.runtime.StreamLoop`) against the sensor's budget;
 6. **report**: ``<out>/report.md`` indexes each family's comparison report.
@@ -161,17 +163,20 @@ def demo_main(cfg: DictConfig) -> Path:
 
     # 4. export the best of each family ------------------------------------------------------
     from slipkit.compare.costs import export_run, time_bundle
-    from slipkit.compare.table import best_row
+    from slipkit.compare.table import choose_deploy
 
     best: dict[str, dict[str, Any]] = {}
     exported: dict[str, Path] = {}
     for family, res in tqdm(
         list(results.items()), desc="4/6 export best", unit="family", disable=not show
     ):
-        row = best_row(res.table)
+        # the comparison report's own rule (one function): within budget, else shown only
+        choice = choose_deploy(res.table)
+        row = choice.row
         if row is None:
             continue
         best[family] = {str(k): v for k, v in row.to_dict().items()}
+        best[family]["recommended"] = choice.recommended
         if row["export"] != "ok":
             continue
         bundle = out / "exports" / family
@@ -212,7 +217,12 @@ def demo_main(cfg: DictConfig) -> Path:
             if r is not None
             else str(b.get("export", ""))
         )
-        print(f"{family:<18} best {b.get('estimator', '-')!s:<16} {lat}")
+        note = (
+            ""
+            if b.get("recommended", True)
+            else " (not recommended: no estimator meets the budget)"
+        )
+        print(f"{family:<18} best {b.get('estimator', '-')!s:<16} {lat}{note}")
     print(report)
     return report
 
@@ -263,7 +273,12 @@ def _write_index(
             + " | ".join(
                 [
                     family,
-                    f"`{b.get('estimator', '-')}`",
+                    f"`{b.get('estimator', '-')}`"
+                    + (
+                        ""
+                        if b.get("recommended", True)
+                        else " (not recommended: no estimator meets the budget)"
+                    ),
                     str(b.get("kind", "")),
                     f"{primary} {_fmt(b.get(primary), '{:.4g}')}"
                     if primary

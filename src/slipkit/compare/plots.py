@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 
 from slipkit.compare.adapters import Evaluation
+from slipkit.compare.table import metric_unit, score_of
 
 COLORS = {"learned": "tab:blue", "analytic": "tab:orange"}
 
@@ -26,47 +27,104 @@ def _save(fig: Any, path: Path) -> Path:
     return path
 
 
-def plot_pareto(df: pd.DataFrame, primary: str, title: str, path: Path) -> Path | None:
-    """Score against p50 compute per frame (us, log), the Pareto front joined; budget lines."""
-    ok = df[
-        np.isfinite(df["p50_us"].to_numpy(float))
-        & np.isfinite(df["score"].to_numpy(float))
-    ]
-    if ok.empty:
+#: point-label offsets (points) cycled over the points in x order, so neighbours alternate
+#: above / below and left / right; a hand-written stagger (no adjustText dependency)
+LABEL_OFFSETS = ((6, 5), (6, -11), (-6, 5), (-6, -11))
+
+
+def pareto_points(df: pd.DataFrame) -> pd.DataFrame:
+    """What :func:`plot_pareto` draws: one row per estimator with a measured p99 and a score.
+
+    Returns
+    -------
+    pandas.DataFrame
+        ``estimator``, ``kind``, ``x_us`` (p99 compute per frame, us: the percentile the
+        budget is checked on), ``score``, ``pareto`` (bool), ``budget_us`` (the p99
+        budget), ``dx``, ``dy`` (label offset, points, staggered between neighbours).
+    """
+    x = df["p99_us"].to_numpy(float)
+    y = df["score"].to_numpy(float)
+    ok = df[np.isfinite(x) & np.isfinite(y)]
+    pts = pd.DataFrame(
+        {
+            "estimator": ok["estimator"].astype(str).to_numpy(),
+            "kind": ok["kind"].astype(str).to_numpy(),
+            "x_us": ok["p99_us"].to_numpy(float),
+            "score": ok["score"].to_numpy(float),
+            "pareto": ok["pareto"].astype(bool).to_numpy(),
+            "budget_us": ok["budget_p99_us"].to_numpy(float),
+        }
+    )
+    order = np.lexsort((pts["score"].to_numpy(), pts["x_us"].to_numpy()))
+    offsets = np.zeros((len(pts), 2))
+    for rank, i in enumerate(order):
+        offsets[i] = LABEL_OFFSETS[rank % len(LABEL_OFFSETS)]
+    pts["dx"] = offsets[:, 0]
+    pts["dy"] = offsets[:, 1]
+    return pts
+
+
+def score_label(primary: str, columns: Sequence[str] = ()) -> str:
+    """The score axis label with its unit: ``-rmse (N), higher is better`` or ``accuracy (fraction)``."""
+    unit = metric_unit(primary, columns)
+    if score_of({primary: 1.0}, primary) < 0:
+        return f"score = -{primary} ({unit or 'its unit'}), higher is better"
+    return f"{primary} ({unit or 'fraction, 0-1'})"
+
+
+def pareto_figure(df: pd.DataFrame, primary: str, title: str) -> Any | None:
+    """The Pareto figure (score against p99 compute per frame), or None with nothing to draw."""
+    pts = pareto_points(df)
+    if pts.empty:
         return None
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
-    for kind, color in COLORS.items():
-        part = ok[ok["kind"] == kind]
-        ax.scatter(part["p50_us"], part["score"], c=color, s=40, label=kind, zorder=3)
-    for _, r in ok.iterrows():
+    for kind in sorted(set(pts["kind"])):  # legend entries only for kinds drawn
+        part = pts[pts["kind"] == kind]
+        ax.scatter(
+            part["x_us"],
+            part["score"],
+            c=COLORS.get(kind, "tab:gray"),
+            s=40,
+            label=kind,
+            zorder=3,
+        )
+    for _, r in pts.iterrows():
         ax.annotate(
-            str(r["estimator"]),
-            (r["p50_us"], r["score"]),
+            r["estimator"],
+            (r["x_us"], r["score"]),
             textcoords="offset points",
-            xytext=(5, 4),
+            xytext=(r["dx"], r["dy"]),
+            ha="left" if r["dx"] >= 0 else "right",
             fontsize=8,
         )
-    front = ok[ok["pareto"].astype(bool)].sort_values("p50_us")
-    ax.step(
-        front["p50_us"],
-        front["score"],
-        where="post",
-        color="k",
-        lw=1.2,
-        label="Pareto front",
-        zorder=2,
-    )
-    ax.scatter(
-        front["p50_us"],
-        front["score"],
-        s=140,
-        facecolors="none",
-        edgecolors="k",
-        zorder=4,
-    )
-    budgets = sorted(set(ok["budget_p99_us"].dropna().round(3)))
-    for b in budgets:
-        ax.axvline(b, color="tab:red", ls="--", lw=1)
+    front = pts[pts["pareto"]].sort_values("x_us")
+    if len(front):
+        ax.step(
+            front["x_us"],
+            front["score"],
+            where="post",
+            color="k",
+            lw=1.2,
+            label="Pareto front",
+            zorder=2,
+        )
+        ax.scatter(
+            front["x_us"],
+            front["score"],
+            s=140,
+            facecolors="none",
+            edgecolors="k",
+            zorder=4,
+        )
+    budgets = sorted(set(pts["budget_us"].dropna().round(3)))
+    for i, b in enumerate(budgets):
+        ax.axvline(
+            b,
+            color="tab:red",
+            ls="--",
+            lw=1,
+            label="p99 budget" if i == 0 else None,
+        )
         ax.text(
             b,
             ax.get_ylim()[0],
@@ -78,15 +136,18 @@ def plot_pareto(df: pd.DataFrame, primary: str, title: str, path: Path) -> Path 
             ha="right",
         )
     ax.set_xscale("log")
-    ax.set_xlabel("compute per frame, p50 (us, ONNX runtime loop, 1 thread)")
-    from slipkit.compare.table import score_of
-
-    negated = score_of({primary: 1.0}, primary) < 0
-    ax.set_ylabel(f"-{primary} (score: higher is better)" if negated else primary)
+    ax.set_xlabel("compute per frame, p99 (us, ONNX runtime loop, 1 thread)")
+    ax.set_ylabel(score_label(primary, list(df.columns)))
     ax.set_title(title, fontsize=10)
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8, loc="best")
-    return _save(fig, path)
+    return fig
+
+
+def plot_pareto(df: pd.DataFrame, primary: str, title: str, path: Path) -> Path | None:
+    """Score against p99 compute per frame (us, log), the Pareto front joined, p99 budget lines."""
+    fig = pareto_figure(df, primary, title)
+    return None if fig is None else _save(fig, path)
 
 
 def plot_curves(evals: Mapping[str, Evaluation], which: str, path: Path) -> Path | None:
@@ -113,7 +174,7 @@ def plot_curves(evals: Mapping[str, Evaluation], which: str, path: Path) -> Path
     if which == "vs_time":
         ax.axvline(0.0, color="k", lw=0.8, ls=":")
     ax.set_xlabel(xlabel)
-    ax.set_ylabel("test accuracy")
+    ax.set_ylabel("test accuracy (fraction, 0-1)")
     ax.set_ylim(-0.02, 1.02)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
@@ -131,14 +192,14 @@ def plot_roc(evals: Mapping[str, Evaluation], path: Path) -> Path | None:
             r["fpr"],
             r["tpr"],
             lw=1.3,
-            label=f"{name} (AUC {r['auc']:.3f}, {r['unit']})",
+            label=f"{name} (AUC {r['auc']:.3f}, per {r['unit']})",
         )
         pt = r.get("point")
         if pt is not None and all(math.isfinite(v) for v in pt):
             ax.plot(*pt, "o", color=line.get_color(), ms=7, mec="k")
     ax.plot([0, 1], [0, 1], color="0.6", lw=0.8, ls=":")
-    ax.set_xlabel("false positive rate")
-    ax.set_ylabel("true positive rate")
+    ax.set_xlabel("false positive rate (fraction, 0-1)")
+    ax.set_ylabel("true positive rate (fraction, 0-1)")
     ax.set_title("ROC (dots: the chosen threshold)", fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="lower right")
@@ -206,8 +267,8 @@ def plot_search(evals: Mapping[str, Evaluation], path: Path) -> Path | None:
         v = h["value"].to_numpy(float)
         ax.plot(h["number"] + 1, v, "o", ms=3, alpha=0.5)
         ax.plot(h["number"] + 1, np.fmax.accumulate(v), label=f"{name} (best so far)")
-    ax.set_xlabel("search trials (Optuna TPE)")
-    ax.set_ylabel("cross-validated score (training side)")
+    ax.set_xlabel("search trials (count, Optuna TPE)")
+    ax.set_ylabel("cross-validated score (the task's objective, training side)")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     return _save(fig, path)
@@ -235,7 +296,14 @@ def plot_confusions(evals: Mapping[str, Evaluation], path: Path) -> Path | None:
                     fontsize=8,
                     color="white" if norm[i, j] > 0.5 else "black",
                 )
-        ax.set_xticks(range(len(labels)), labels, rotation=45, fontsize=7)
+        ax.set_xticks(
+            range(len(labels)),
+            labels,
+            rotation=45,
+            ha="right",
+            rotation_mode="anchor",
+            fontsize=7,
+        )
         ax.set_yticks(range(len(labels)), labels, fontsize=7)
         ax.set_title(name, fontsize=9)
         ax.set_xlabel("predicted", fontsize=8)
@@ -244,6 +312,8 @@ def plot_confusions(evals: Mapping[str, Evaluation], path: Path) -> Path | None:
 
 
 __all__ = [
+    "pareto_figure",
+    "pareto_points",
     "plot_confusions",
     "plot_curves",
     "plot_delays",
@@ -251,4 +321,5 @@ __all__ = [
     "plot_pareto",
     "plot_roc",
     "plot_search",
+    "score_label",
 ]

@@ -9,7 +9,13 @@ from typing import Any
 
 import pandas as pd
 
-from slipkit.compare.table import best_row, score_of
+from slipkit.compare.table import (
+    BORDERLINE,
+    choose_deploy,
+    metric_unit,
+    per_unit,
+    score_of,
+)
 
 #: (column, header, format) of the report's main table
 MAIN = (
@@ -93,38 +99,78 @@ def markdown_table(df: pd.DataFrame, spec: Sequence[tuple[str, str, str]]) -> st
     return "\n".join(lines)
 
 
-def verdict(df: pd.DataFrame, primary: str) -> list[str]:
-    """Which estimator to deploy, and what each step along the Pareto front costs."""
-    best = best_row(df)
+def margin_text(p99_us: float, budget_us: float, margin: float) -> str:
+    """``p99 87.2 us = 0.10 x the 833.3 us budget``, flagged when borderline (noisy)."""
+    text = f"p99 {p99_us:.1f} us = {margin:.2f} x the {budget_us:.4g} us budget"
+    if margin > BORDERLINE:
+        text += (
+            f" (borderline: above {BORDERLINE:.0%} of the budget, a re-measure on a busy "
+            "machine may land on the other side)"
+        )
+    return text
+
+
+def deploy_lines(df: pd.DataFrame, primary: str) -> list[str]:
+    """The deploy decision of :func:`~slipkit.compare.table.choose_deploy` as Markdown lines.
+
+    The recommended estimator with its p99 / budget margin, or "no estimator meets the
+    budget" and the best-scoring one with its p99; then each higher-scoring estimator
+    passed over with its reason.
+    """
+    choice = choose_deploy(df)
+    best = choice.row
     if best is None:
         return ["No estimator produced a score."]
-    out = [
-        f"**Deploy `{best['estimator']}`** ({best['kind']}, {best['class']}): {primary} "
-        f"{fmt(best[primary], '{:.4g}')}"
-        + (
-            f", p99 {best['p99_us']:.1f} us against a {best['budget_p99_us']:.4g} us budget"
-            if math.isfinite(float(best["p99_us"]))
-            else f" ({best['export']})"
-        )
-        + (
-            f", median detection delay {best['delay_ms']:.1f} ms"
-            if math.isfinite(float(best["delay_ms"]))
-            else ""
-        )
-        + "."
-    ]
-    front = df[df["pareto"].astype(bool)].sort_values("p50_us")
+    p99 = float(best["p99_us"])
+    cost = (
+        ", " + margin_text(p99, float(best["budget_p99_us"]), choice.margin)
+        if math.isfinite(choice.margin)
+        else f" ({best['export']})"
+    )
+    delay = (
+        f", median detection delay {best['delay_ms']:.1f} ms"
+        if math.isfinite(float(best["delay_ms"]))
+        else ""
+    )
+    what = (
+        f"`{best['estimator']}` ({best['kind']}, {best['class']}): {primary} "
+        f"{fmt(best[primary], '{:.4g}')}{cost}{delay}."
+    )
+    out = (
+        [f"**Deploy {what}**"]
+        if choice.recommended
+        else [
+            "**No estimator meets the budget.** The best-scoring "
+            + ("exported " if best["export"] == "ok" else "")
+            + f"one, not recommended: {what}"
+        ]
+    )
+    passed = [(e, w) for e, w in choice.passed_over if e != str(best["estimator"])]
+    if passed:
+        out += ["", "Passed over (higher or equal score):", ""]
+        out += [f"- `{e}`: {w}" for e, w in passed]
+    return out
+
+
+def verdict(df: pd.DataFrame, primary: str) -> list[str]:
+    """Which estimator to deploy (:func:`deploy_lines`), and what each step along the Pareto front costs."""
+    out = deploy_lines(df, primary)
+    if out == ["No estimator produced a score."]:
+        return out
+    front = df[df["pareto"].astype(bool)].sort_values("p99_us")
+    unit = metric_unit(primary, list(df.columns))
     if len(front) > 1:
         out.append("")
         out.append(
-            "Along the Pareto front (cheapest first), what the next step of accuracy costs:"
+            "Along the Pareto front (p99 compute, cheapest first), what the next step of "
+            "accuracy costs:"
         )
         out.append("")
         prev = None
         for _, r in front.iterrows():
             if prev is not None:
                 d_score = float(r["score"]) - float(prev["score"])
-                d_us = float(r["p50_us"]) - float(prev["p50_us"])
+                d_us = float(r["p99_us"]) - float(prev["p99_us"])
                 d_delay = float(r["delay_ms"]) - float(prev["delay_ms"])
                 delay = (
                     f", {d_delay:+.1f} ms detection delay"
@@ -132,8 +178,12 @@ def verdict(df: pd.DataFrame, primary: str) -> list[str]:
                     else ""
                 )
                 if score_of({primary: 1.0}, primary) < 0:  # lower is better: own units
-                    gain = f"{-d_score:+.4g} {primary}"
-                    per = f" ({d_us / d_score:.3g} us per unit)" if d_score > 0 else ""
+                    gain = f"{-d_score:+.4g} {unit + ' ' if unit else ''}{primary}"
+                    per = (
+                        f" ({d_us / d_score:.3g} {per_unit('us', unit) if unit else 'us per unit of ' + primary})"
+                        if d_score > 0
+                        else ""
+                    )
                 else:  # a rate in [0, 1]: percentage points
                     gain = f"{d_score * 100:+.2f} points of {primary}"
                     per = (
@@ -143,7 +193,7 @@ def verdict(df: pd.DataFrame, primary: str) -> list[str]:
                     )
                 out.append(
                     f"- `{prev['estimator']}` -> `{r['estimator']}`: {gain} for "
-                    f"{d_us:+.1f} us per frame{per}{delay}"
+                    f"{d_us:+.1f} us p99 per frame{per}{delay}"
                 )
             prev = r
     return out
@@ -255,4 +305,11 @@ def write_report(
     return path
 
 
-__all__ = ["CONTROLS", "markdown_table", "verdict", "write_report"]
+__all__ = [
+    "CONTROLS",
+    "deploy_lines",
+    "margin_text",
+    "markdown_table",
+    "verdict",
+    "write_report",
+]
