@@ -7,7 +7,7 @@ STAMP  := $(VENV)/.installed
 TORCH  := torch==2.13.0
 
 .DEFAULT_GOAL := help
-.PHONY: help install demo test test-full lint bench clean
+.PHONY: help install demo test test-full lint bench wheel wheelhouse clean
 
 help: ## list the targets
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "} {printf "  %-10s %s\n", $$1, $$2}'
@@ -37,6 +37,19 @@ lint: $(STAMP) ## ruff and mypy on src/
 
 bench: $(STAMP) ## run the benchmarks in benchmarks/
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
+
+wheel: $(STAMP) ## build dist/slipkit-<version>-py3-none-any.whl (pure Python)
+	$(BIN)/python -m pip wheel --quiet --no-deps --no-build-isolation -w dist .
+
+# The runtime's dependencies at the versions installed (and tested) here, as wheels for an
+# offline install on a gripper PC (docs/deploy.md). For another Python or platform on the
+# PC, e.g. WHEELHOUSE_ARGS="--python-version 3.10 --platform manylinux2014_x86_64".
+WHEELHOUSE_ARGS ?=
+wheelhouse: wheel ## wheel + numpy and onnxruntime wheels in wheelhouse/ for an offline install
+	mkdir -p wheelhouse
+	cp dist/slipkit-*-py3-none-any.whl wheelhouse/
+	$(BIN)/python -m pip download --quiet --only-binary=:all: -d wheelhouse $(WHEELHOUSE_ARGS) \
+	  $$($(BIN)/python -c 'import numpy, onnxruntime; print(f"numpy=={numpy.__version__} onnxruntime=={onnxruntime.__version__}")')
 
 clean: ## remove the virtual environment, caches and demo output
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .hypothesis outputs multirun runs data/demo

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -20,8 +21,12 @@ from slipkit.runtime.modules import heavy_modules_loaded
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def _run(*cmd: str) -> subprocess.CompletedProcess[str]:
-    done = subprocess.run(cmd, capture_output=True, text=True, check=False, timeout=900)
+def _run(
+    *cmd: str, env: dict[str, str] | None = None
+) -> subprocess.CompletedProcess[str]:
+    done = subprocess.run(
+        cmd, capture_output=True, text=True, check=False, timeout=900, env=env
+    )
     assert 0 == done.returncode, f"{' '.join(cmd)}\n{done.stderr[-3000:]}"
     return done
 
@@ -76,3 +81,97 @@ def test_runtime_extra_installs_and_runs_without_the_training_stack(
         dos_summary["budget_ms"]["frame_period"],
         "check: passed" in done.stdout,
     )
+
+
+@pytest.mark.slow
+def test_offline_install_from_a_wheelhouse_runs_a_bundle(tmp_path: Path) -> None:
+    """`make wheelhouse`'s recipe: a fresh venv installs slipkit with --no-index from it and runs a bundle."""
+    import numpy
+    import onnxruntime
+
+    house = tmp_path / "wheelhouse"
+    # The wheel, as `make wheel` builds it.
+    _run(
+        sys.executable,
+        "-m",
+        "pip",
+        "wheel",
+        "--no-deps",
+        "--no-build-isolation",
+        "-q",
+        "-w",
+        str(house),
+        str(ROOT),
+    )
+    # The runtime's dependencies at the versions tested here, as `make wheelhouse`
+    # downloads them (this machine reaches PyPI; the gripper PC need not).
+    _run(
+        sys.executable,
+        "-m",
+        "pip",
+        "download",
+        "-q",
+        "--only-binary=:all:",
+        "-d",
+        str(house),
+        f"numpy=={numpy.__version__}",
+        f"onnxruntime=={onnxruntime.__version__}",
+    )
+    venv = tmp_path / "venv"
+    _run(sys.executable, "-m", "venv", str(venv))
+    python = str(venv / "bin" / "python")
+    # Offline: no index, and none of this machine's pip configuration (its find-links
+    # and extra indexes), so every file must come from the wheelhouse.
+    offline = {k: v for k, v in os.environ.items() if not k.startswith("PIP_")}
+    offline["PIP_CONFIG_FILE"] = os.devnull
+    _run(
+        python,
+        "-m",
+        "pip",
+        "install",
+        "-q",
+        "--no-index",
+        "--find-links",
+        str(house),
+        "slipkit",
+        env=offline,
+    )
+    installed = _run(python, "-m", "pip", "list", "--format=freeze").stdout.lower()
+    names = {line.split("==")[0] for line in installed.splitlines()}
+    assert {"slipkit", "numpy", "onnxruntime"} <= names
+    assert set() == names & {"torch", "scikit-learn", "hydra-core", "pandas", "scipy"}
+
+    bundle = pin_bundle(tmp_path / "bundles")
+    done = _run(
+        str(venv / "bin" / "slipkit-run"),
+        str(bundle),
+        "--replay",
+        str(bundle / "replay.npz"),
+        "--check",
+        "--json",
+        str(tmp_path / "s.json"),
+    )
+    assert (True, 79) == (
+        "check: passed" in done.stdout,
+        json.loads((tmp_path / "s.json").read_text())["decisions"],
+    )
+
+    # Cold start in the runtime-only venv (docs/deploy.md quotes this benchmark).
+    (tmp_path / "tmp").mkdir()
+    bench_env = {**os.environ, "TMPDIR": str(tmp_path / "tmp")}  # its bundles go here
+    bench = _run(
+        sys.executable,
+        str(ROOT / "benchmarks" / "bench_cold_start.py"),
+        "--python",
+        python,
+        "--repeats",
+        "3",
+        env=bench_env,
+    )
+    print(bench.stdout)
+    rows = [
+        line.split()[2]
+        for line in bench.stdout.splitlines()
+        if "first decision" in line
+    ]
+    assert ["fsr_linear", "biotac_mlp", "tactip_rbf"] == rows
