@@ -78,6 +78,21 @@ def test_borderline_margin_is_flagged() -> None:
     assert "p99 48.0 us = 0.96 x the 50 us budget (borderline" in first
 
 
+def test_far_over_budget_is_not_borderline() -> None:
+    """A p99 many times the budget is plainly over it, not a borderline case."""
+    df = build_table([_row("far", 0.9, 3572.4)], "balanced_accuracy")
+    assert "borderline" not in verdict(df, "balanced_accuracy")[0]
+
+
+def test_slightly_over_budget_is_borderline_and_not_recommended() -> None:
+    """A p99 of 60.6 us against 50 us is not recommended and is flagged borderline."""
+    df = build_table([_row("fsr", 0.9, 60.6, budget=50.0)], "balanced_accuracy")
+    choice = choose_deploy(df)
+    first = verdict(df, "balanced_accuracy")[0]
+    assert (False, True) == (choice.recommended, choice.borderline)
+    assert "p99 60.6 us = 1.21 x the 50 us budget (borderline" in first
+
+
 def test_pareto_plot_uses_p99() -> None:
     """The Pareto points sit at each estimator's p99, not its p50."""
     pts = pareto_points(_table())

@@ -12,6 +12,7 @@ import pandas as pd
 from slipkit.compare.table import (
     BORDERLINE,
     choose_deploy,
+    is_borderline,
     metric_unit,
     per_unit,
     score_of,
@@ -102,10 +103,10 @@ def markdown_table(df: pd.DataFrame, spec: Sequence[tuple[str, str, str]]) -> st
 def margin_text(p99_us: float, budget_us: float, margin: float) -> str:
     """``p99 87.2 us = 0.10 x the 833.3 us budget``, flagged when borderline (noisy)."""
     text = f"p99 {p99_us:.1f} us = {margin:.2f} x the {budget_us:.4g} us budget"
-    if margin > BORDERLINE:
+    if is_borderline(margin):
         text += (
-            f" (borderline: above {BORDERLINE:.0%} of the budget, a re-measure on a busy "
-            "machine may land on the other side)"
+            f" (borderline: between {BORDERLINE:.2f} and {1 / BORDERLINE:.2f} x the budget, "
+            "a re-measure on a busy machine may land on the other side)"
         )
     return text
 

@@ -148,6 +148,11 @@ def build_table(rows: Sequence[dict[str, object]], primary: str) -> pd.DataFrame
 BORDERLINE = 0.8
 
 
+def is_borderline(margin: float) -> bool:
+    """True when p99 / budget ``margin`` lies between :data:`BORDERLINE` and its inverse."""
+    return bool(math.isfinite(margin) and BORDERLINE < margin < 1 / BORDERLINE)
+
+
 @dataclass(frozen=True)
 class DeployChoice:
     """Which estimator a comparison recommends, and why the higher-scoring ones were passed over.
@@ -173,8 +178,8 @@ class DeployChoice:
 
     @property
     def borderline(self) -> bool:
-        """True when the p99 is above :data:`BORDERLINE` of the budget (a noisy choice)."""
-        return bool(np.isfinite(self.margin) and self.margin > BORDERLINE)
+        """True when p99 / budget is in (:data:`BORDERLINE`, 1 / :data:`BORDERLINE`): noisy."""
+        return is_borderline(self.margin)
 
 
 def _rejection(r: pd.Series) -> str | None:
@@ -259,6 +264,7 @@ __all__ = [
     "best_row",
     "build_table",
     "choose_deploy",
+    "is_borderline",
     "metric_unit",
     "pareto_front",
     "per_unit",
