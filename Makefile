@@ -52,4 +52,4 @@ wheelhouse: wheel ## wheel + numpy and onnxruntime wheels in wheelhouse/ for an 
 	  $$($(BIN)/python -c 'import numpy, onnxruntime; print(f"numpy=={numpy.__version__} onnxruntime=={onnxruntime.__version__}")')
 
 clean: ## remove the virtual environment, caches and demo output
-	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .hypothesis outputs multirun runs data/demo
+	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .hypothesis outputs multirun runs data/demo dist wheelhouse
