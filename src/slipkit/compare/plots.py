@@ -11,6 +11,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
+import matplotlib.ticker as mticker
 import numpy as np
 import pandas as pd
 
@@ -128,7 +129,7 @@ def pareto_figure(df: pd.DataFrame, primary: str, title: str) -> Any | None:
         ax.text(
             b,
             ax.get_ylim()[0],
-            f" p99 budget {b:g} us",
+            f" p99 budget {b:.4g} us",
             color="tab:red",
             fontsize=8,
             rotation=90,
@@ -136,6 +137,11 @@ def pareto_figure(df: pd.DataFrame, primary: str, title: str) -> Any | None:
             ha="right",
         )
     ax.set_xscale("log")
+    # plain numbers at 1, 2, 5 x 10^k only: the default minor labels (3x10^1, 4x10^1) collide
+    ax.xaxis.set_major_locator(mticker.LogLocator(subs=(1.0, 2.0, 5.0)))
+    ax.xaxis.set_major_formatter(mticker.FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.xaxis.set_minor_formatter(mticker.NullFormatter())
+    ax.margins(x=0.12, y=0.12)  # room for the staggered labels of the edge points
     ax.set_xlabel("compute per frame, p99 (us, ONNX runtime loop, 1 thread)")
     ax.set_ylabel(score_label(primary, list(df.columns)))
     ax.set_title(title, fontsize=10)
