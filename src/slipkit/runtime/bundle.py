@@ -422,17 +422,19 @@ def _frame(f: Fields) -> FrameSpec:
         hop=f.integer("hop", 1, minimum=1, maximum=MAX_FRAMES),
         rate_hz=f.number("rate_hz", positive=True, maximum=MAX_RATE_HZ),
     )
-    if spec.window * spec.n_values > MAX_VALUES:
-        raise f.error(
-            "window",
-            f"{spec.window} frames of {spec.n_values} values exceed the {MAX_VALUES} "
-            "values a window may hold",
-        )
+    # shape against channels first: a shape that disagrees is named there, not as
+    # a window too large for it
     if spec.n_values != len(spec.channels):
         raise f.error(
             "channels",
             f"has {len(spec.channels)} names but frame.shape {list(spec.shape)} holds "
             f"{spec.n_values} values (one name per value)",
+        )
+    if spec.window * spec.n_values > MAX_VALUES:
+        raise f.error(
+            "window",
+            f"{spec.window} frames of {spec.n_values} values exceed the {MAX_VALUES} "
+            "values a window may hold",
         )
     return spec
 
