@@ -39,6 +39,14 @@ op                           parameters, effect
                              frames of the *stream* (stateful: collected from the
                              windows as they arrive; until ``frames`` frames have
                              arrived, the median of those that have)
+``davis_areas``              ``opening_px``, ``closing_px`` (int 0..32, px),
+                             ``opening_shape`` (``square``/``lines``),
+                             ``min_area_px`` (int): one DAVIS event frame
+                             ``(1, 2, H, W)`` (positive, negative event counts)
+                             -> the filtered positive and negative areas
+                             ``(1, 2)`` (px) of
+                             :func:`slipkit.baselines.davis.clean_frame`
+                             (opening, closing, 8-connected area filter)
 ===========================  =====================================================
 """
 
@@ -365,3 +373,183 @@ class Pipeline:
         for op in self.ops:
             window = op(window)
         return window
+
+
+# -- DAVIS event frames: opening, closing, area filter, areas --------------------------------
+# The DAVIS detector (slipkit.baselines.davis.clean_frame) uses scipy.ndimage for the
+# morphology and the connected-component labelling. scipy is not installed on the
+# gripper PC (the runtime imports only numpy and onnxruntime) and ONNX has no
+# connected-component op, so they are written here by hand in vectorised numpy; the
+# tests check them against scipy.ndimage on random frames.
+
+
+def _shifted(img: NDArray[np.bool_], shift: int, axis: int) -> NDArray[np.bool_]:
+    """``out[i] = img[i + shift]`` along ``axis``, False outside the frame."""
+    out = np.zeros_like(img)
+    n = img.shape[axis]
+    src = [slice(None)] * img.ndim
+    dst = [slice(None)] * img.ndim
+    if shift >= 0:
+        src[axis], dst[axis] = slice(shift, n), slice(0, max(n - shift, 0))
+    else:
+        src[axis], dst[axis] = slice(0, n + shift), slice(-shift, n)
+    out[tuple(dst)] = img[tuple(src)]
+    return out
+
+
+def _erode(img: NDArray[np.bool_], size: int) -> NDArray[np.bool_]:
+    """Binary erosion by a ``size`` square, border False (scipy's default origin)."""
+    for axis in (0, 1):
+        out = np.ones_like(img)
+        for k in range(size):
+            out &= _shifted(img, k - size // 2, axis)
+        img = out
+    return img
+
+
+def _dilate(img: NDArray[np.bool_], size: int) -> NDArray[np.bool_]:
+    """Binary dilation by a ``size`` square (scipy's default origin)."""
+    for axis in (0, 1):
+        out = np.zeros_like(img)
+        for k in range(size):
+            out |= _shifted(img, size // 2 - k, axis)
+        img = out
+    return img
+
+
+def label_components(img: NDArray[np.bool_]) -> tuple[NDArray[np.intp], int]:
+    """8-connected components of a binary image: labels 1..n (0: background), n.
+
+    Hand-written because ``scipy.ndimage.label`` is not available on the gripper PC
+    (see above). Vectorised label propagation with pointer jumping: every set pixel
+    starts with its own flat index as label, then repeatedly takes the smallest
+    label among itself and its 8 neighbours and follows ``label[label]`` (which
+    halves the chains), until nothing changes; each component ends with the index
+    of its first pixel in raster order. Labels are then renumbered 1..n in raster
+    order of each component's first pixel, as ``scipy.ndimage.label`` numbers them.
+
+    Parameters
+    ----------
+    img : ndarray of bool (height, width)
+
+    Returns
+    -------
+    labels : ndarray of int (height, width)
+    n : int
+        Number of components.
+    """
+    img = np.asarray(img, dtype=bool)
+    h, w = img.shape
+    big = h * w
+    # A one-pixel False border: neighbours are plain slices, no wrap-around.
+    pad = np.zeros((h + 2, w + 2), dtype=bool)
+    pad[1:-1, 1:-1] = img
+    lab = np.full((h + 2, w + 2), big, dtype=np.intp)
+    flat = np.arange(big, dtype=np.intp).reshape(h, w)
+    lab[1:-1, 1:-1] = np.where(img, flat, big)
+    inner = lab[1:-1, 1:-1]
+    while True:
+        best = inner.copy()
+        for dr in (-1, 0, 1):
+            for dc in (-1, 0, 1):
+                if dr or dc:
+                    np.minimum(
+                        best, lab[1 + dr : h + 1 + dr, 1 + dc : w + 1 + dc], out=best
+                    )
+        best = np.where(img, best, big)
+        # Pointer jumping: a pixel takes its label's label (labels are flat indices).
+        on = best < big
+        best[on] = best.ravel()[best[on]]
+        if np.array_equal(best, inner):
+            break
+        inner[...] = best
+    roots = np.flatnonzero(img.ravel() & (inner.ravel() == np.arange(big)))
+    out = np.zeros((h, w), dtype=np.intp)
+    if len(roots):
+        # roots are sorted flat indices: component k (raster order of its first
+        # pixel) gets label k + 1.
+        out[img] = np.searchsorted(roots, inner[img]) + 1
+    return out, len(roots)
+
+
+def clean_event_frame(
+    img: NDArray[np.bool_],
+    *,
+    opening_px: int,
+    opening_shape: str,
+    closing_px: int,
+    min_area_px: int,
+) -> NDArray[np.bool_]:
+    """:func:`slipkit.baselines.davis.clean_frame` in numpy: opening, closing, area filter."""
+    img = np.asarray(img, dtype=bool)
+    if not img.any():
+        return img
+    if opening_px > 1:
+        if opening_shape == "square":
+            img = _dilate(_erode(img, opening_px), opening_px)
+        else:  # "lines": union of the openings with a horizontal and a vertical line
+            img = _line_opening(img, opening_px, 1) | _line_opening(img, opening_px, 0)
+    if closing_px > 1 and img.any():
+        # Padded by closing_px so the erosion never meets the border, as the detector.
+        p = closing_px
+        box = np.pad(img, p)
+        img = _erode(_dilate(box, p), p)[p:-p, p:-p]
+    if min_area_px > 1 and img.any():
+        labels, n = label_components(img)
+        sizes = np.bincount(labels.ravel(), minlength=n + 1)
+        keep = sizes >= min_area_px
+        keep[0] = False
+        img = keep[labels]
+    return img
+
+
+def _line_opening(img: NDArray[np.bool_], size: int, axis: int) -> NDArray[np.bool_]:
+    """Opening by a ``size`` line along ``axis`` (1: horizontal, 0: vertical)."""
+    ero = np.ones_like(img)
+    for k in range(size):
+        ero &= _shifted(img, k - size // 2, axis)
+    out = np.zeros_like(img)
+    for k in range(size):
+        out |= _shifted(ero, size // 2 - k, axis)
+    return out
+
+
+class _DavisAreas:
+    """Event frames ``(1, 2, H, W)`` (positive, negative counts) -> filtered areas ``(1, 2)``."""
+
+    def __init__(self, params: dict[str, Any], in_shape: tuple[int, ...]) -> None:
+        self.params = params
+        self.out_shape = (1, 2)
+        self._buf = np.empty(self.out_shape)
+
+    def __call__(self, x: Array) -> Array:
+        for i in (0, 1):
+            kept = clean_event_frame(x[-1, i] > 0, **self.params)
+            self._buf[0, i] = np.count_nonzero(kept)
+        return self._buf
+
+
+#: largest opening / closing element of ``davis_areas`` (px)
+MAX_MORPHOLOGY_PX = 32
+
+
+@register_op("davis_areas")
+def _davis_areas(f: Fields, in_shape: tuple[int, ...]) -> Op:
+    f.only(("op", "opening_px", "opening_shape", "closing_px", "min_area_px"))
+    if len(in_shape) != 4 or in_shape[0] != 1 or in_shape[1] != 2:
+        raise f.error(
+            "op",
+            "needs one event frame of shape (1, 2, height, width) (positive then "
+            f"negative event counts per pixel); the step's input is {list(in_shape)}",
+        )
+    params = {
+        "opening_px": f.integer("opening_px", minimum=0, maximum=MAX_MORPHOLOGY_PX),
+        "opening_shape": f.string(
+            "opening_shape", "square", choices=("square", "lines")
+        ),
+        "closing_px": f.integer("closing_px", minimum=0, maximum=MAX_MORPHOLOGY_PX),
+        "min_area_px": f.integer(
+            "min_area_px", minimum=0, maximum=in_shape[2] * in_shape[3]
+        ),
+    }
+    return _DavisAreas(params, in_shape)
