@@ -187,3 +187,25 @@ def test_sliptack_spectral_regressor_beside_the_analytic_inversion(
     exports = dict(zip(df["estimator"], df["export"], strict=True))
     assert True == exports["spectral_gbr"].startswith("not exportable")  # noqa: E712
     assert True == bool(np.isfinite(df["rmse"]).all())  # noqa: E712
+
+
+def _compose_comparison(family: str, overrides: list[str] | None = None):
+    """The composed ``comparison=<family>`` node (no run)."""
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        cfg = compose(
+            config_name="compare",
+            overrides=[f"comparison={family}", *(overrides or [])],
+        )
+    return cfg.comparison
+
+
+def test_biotac_force_runs_on_the_hard_probe_with_analytic_and_learned() -> None:
+    """BioTac force: the hard probe by default, the base probe as an override, normals beside the MLPs."""
+    comp = _compose_comparison("biotac_force")
+    base = _compose_comparison(
+        "biotac_force", ["scene@comparison.scene=biotac_force_probe"]
+    )
+    assert "biotac_force_probe_hard" == comp.scene.name
+    assert "biotac_force_probe" == base.scene.name
+    assert ["normals"] == list(comp.analytic)
+    assert {"lwr", "mlp1", "mlp3"} == set(comp.estimators) - set(comp.analytic)
