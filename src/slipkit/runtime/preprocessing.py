@@ -489,18 +489,29 @@ def clean_event_frame(
             img = _dilate(_erode(img, opening_px), opening_px)
         else:  # "lines": union of the openings with a horizontal and a vertical line
             img = _line_opening(img, opening_px, 1) | _line_opening(img, opening_px, 0)
-    if closing_px > 1 and img.any():
-        # Padded by closing_px so the erosion never meets the border, as the detector.
-        p = closing_px
-        box = np.pad(img, p)
-        img = _erode(_dilate(box, p), p)[p:-p, p:-p]
-    if min_area_px > 1 and img.any():
-        labels, n = label_components(img)
+    if not img.any():
+        return img
+    # Closing and labelling only on the bounding box of what the opening kept (the
+    # opening removes the scattered noise events, so the box is usually small): a
+    # closing adds pixels only within closing_px of a set one, and padding the box
+    # by closing_px keeps the erosion off the border, as the detector does.
+    p = max(closing_px, 0)
+    rows, cols = np.flatnonzero(img.any(axis=1)), np.flatnonzero(img.any(axis=0))
+    r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+    box = np.pad(img[r0:r1, c0:c1], p)
+    if closing_px > 1:
+        box = _erode(_dilate(box, p), p)
+    if min_area_px > 1:
+        labels, n = label_components(box)
         sizes = np.bincount(labels.ravel(), minlength=n + 1)
         keep = sizes >= min_area_px
         keep[0] = False
-        img = keep[labels]
-    return img
+        box = keep[labels]
+    # Back into the box only, as the detector (a closing by a square never sets a
+    # pixel outside the bounding box of the set ones).
+    out = np.zeros_like(img)
+    out[r0:r1, c0:c1] = box[p : p + r1 - r0, p : p + c1 - c0]
+    return out
 
 
 def _line_opening(img: NDArray[np.bool_], size: int, axis: int) -> NDArray[np.bool_]:
