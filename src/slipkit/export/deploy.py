@@ -152,6 +152,9 @@ class Deployment:
         The saved model was refit on every trial after scoring (k-fold runs).
     scored_on : str or None
         What the run's metrics were computed on (None: the run's held-out test split).
+    max_replay_frames : int or None
+        A cap on the replay frames below the export config's (large frames, e.g.
+        DAVIS event images); None: the config's alone.
     """
 
     frame: dict[str, Any]
@@ -168,6 +171,7 @@ class Deployment:
     slip_classes: list[str] | None = None
     refit_on_all_data: bool = False
     scored_on: str | None = None
+    max_replay_frames: int | None = None
 
     @property
     def frame_shape(self) -> tuple[int, ...]:
@@ -187,8 +191,12 @@ class Deployment:
         would fill with its first classes. In that rank, a trial that would
         exceed ``max_frames`` is passed over for a shorter one; the chosen trials
         keep their original order. When no whole trial fits, the first trial is
-        cut to ``max_frames``.
+        cut to ``max_frames``. ``max_replay_frames`` caps ``max_frames``.
         """
+        if self.max_replay_frames is not None:
+            max_frames = min(
+                max_frames or self.max_replay_frames, self.max_replay_frames
+            )
         if max_frames is None:
             return list(self.trials)
         order = _stratified_order(
@@ -935,3 +943,157 @@ def _register_sliptack() -> None:
 
 
 _register_sliptack()
+
+
+# -- DAVIS event frames (appended: the area filter as the runtime op davis_areas) ----------
+
+#: replay bytes a DAVIS bundle may hold (float64 event frames of 2 x H x W values)
+DAVIS_REPLAY_BYTES = 128 << 20
+
+
+def davis_event_frames(
+    events: NDArray[np.float64], *, frame_s: float, height_px: int, width_px: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """One recording's events ``(t, x, y, polarity)`` as the runtime's event frames.
+
+    Frame ``k`` holds the events with ``k frame_s <= t < (k + 1) frame_s`` (the
+    detector's grid, frames 0 to the last event's), as counts per pixel: channel 0
+    positive, channel 1 negative. Its timestamp is the window's end (s), when the
+    frame is complete.
+
+    Returns
+    -------
+    frames : ndarray of shape (n_frames, 2, height_px, width_px)
+    timestamps : ndarray of shape (n_frames,)
+    """
+    ev = np.asarray(events, dtype=np.float64).reshape(-1, 4)
+    n = int(np.floor(ev[-1, 0] / frame_s)) + 1 if len(ev) else 0
+    frames = np.zeros((n, 2, int(height_px), int(width_px)))
+    if len(ev):
+        k = np.floor(ev[:, 0] / frame_s).astype(np.intp)
+        ch = (ev[:, 3] < 0).astype(np.intp)
+        np.add.at(
+            frames, (k, ch, ev[:, 2].astype(np.intp), ev[:, 1].astype(np.intp)), 1
+        )
+    return frames, (np.arange(n) + 1.0) * frame_s
+
+
+def _deploy_davis(
+    task: Task, run: Run, dataset: Dataset, options: Mapping[str, Any]
+) -> Deployment:
+    """``DavisRelease``: event frames in, the area filter as the ``davis_areas`` op.
+
+    Frame = one ``frame_s`` event frame of the ``events`` stream as counts per pixel,
+    shape ``(2, height_px, width_px)`` (positive, negative), window 1, hop 1, at
+    ``1 / frame_s`` Hz. One preprocessing step, ``davis_areas`` (the detector's
+    opening, closing and 8-connected area filter in numpy: ONNX has no connected
+    components), gives the filtered areas; the graph is the polarity rule on them
+    (:class:`slipkit.export.davis.DavisAreaRule`). Before anything is written, the
+    op's areas are checked to equal the detector's (``DavisPolarity.frames``) on
+    every held-out frame. Slip class ``"1"``; debounce 1 (the paper declares slip
+    on one frame).
+    """
+    from slipkit.baselines.davis import DavisPolarity
+    from slipkit.export.davis import DavisAreaRule
+    from slipkit.train.tasks.davis import DavisRelease
+
+    assert isinstance(task, DavisRelease)
+    det = run.model
+    if type(det) is not DavisPolarity:
+        raise SlipkitError(
+            f"run {run.path}: only the DavisPolarity rule deploys on DAVIS (its area "
+            f"filter is the runtime's davis_areas op); the run's model is "
+            f"{type(det).__name__}"
+        )
+    frame_s, h, w = float(det.frame_s), int(det.height_px), int(det.width_px)
+    split = run_metrics(run).get("split", {})
+    if split.get("test"):
+        test_ids = {str(t) for t in split["test"]}
+    else:  # the task's own split, the run's seed
+        from slipkit.data.splits import split_by_trial
+
+        seed = int(run.config.get("seed", 0))
+        test_ids = {
+            str(t)
+            for t in split_by_trial(dataset, test_size=task.test_size, seed=seed).test
+        }
+    step = {
+        "op": "davis_areas",
+        "opening_px": int(det.opening_px),
+        "opening_shape": str(det.opening_shape),
+        "closing_px": int(det.closing_px),
+        "min_area_px": int(det.min_area_px),
+    }
+    pipeline = Pipeline([step], (1, 2, h, w), "manifest.json")
+    trials = []
+    for trial in dataset.subset([t for t in dataset.trial_ids if str(t) in test_ids]):
+        ev = trial.streams[task.stream].sort_values("t", kind="stable")
+        ev = ev[["t", "x", "y", "polarity"]].to_numpy(np.float64)
+        frames, times = davis_event_frames(ev, frame_s=frame_s, height_px=h, width_px=w)
+        if not len(frames):
+            continue
+        # Parity of the op with the training-side detector, frame by frame.
+        want = det.frames(ev)[["pos_area_px", "neg_area_px"]].to_numpy(np.float64)
+        got = np.stack([pipeline(f[None])[0].copy() for f in frames])
+        bad = np.flatnonzero((want != got).any(axis=1))
+        if len(bad):
+            k = int(bad[0])
+            raise SlipkitError(
+                f"trial {trial.trial_id}, frame {k}: the runtime's davis_areas op gives "
+                f"areas {got[k].tolist()} px but the detector {want[k].tolist()} px "
+                f"({len(bad)} of {len(frames)} frames differ); no bundle written"
+            )
+        label = str(int(np.isfinite(float(trial.labels.get(task.label, np.inf)))))
+        group = trial.meta.get(task.group)
+        trials.append(
+            HeldOutTrial(
+                str(trial.trial_id),
+                frames,
+                times,
+                label=label,
+                group=None if group is None else str(group),
+            )
+        )
+    if not trials:
+        raise SlipkitError(
+            f"none of the held-out trials of run {run.path} has events in the rebuilt "
+            f"dataset {dataset.name!r}"
+        )
+    channels = [
+        f"{p}_{r}_{c}" for p in ("pos", "neg") for r in range(h) for c in range(w)
+    ]
+    n_values = 2 * h * w
+    return Deployment(
+        frame={
+            "streams": [task.stream],
+            "channels": channels,
+            "shape": [2, h, w],
+            "window": 1,
+            "hop": 1,
+            "rate_hz": 1.0 / frame_s,
+        },
+        preprocessing=[step],
+        export_options={},
+        positive="1",
+        debounce_k=int(options.get("debounce_k") or 1),
+        trials=trials,
+        model=DavisAreaRule().fit(),
+        max_replay_frames=max(1, DAVIS_REPLAY_BYTES // (8 * n_values)),
+        notes=[
+            f"event frames of {frame_s * 1e3:g} ms ({task.stream!r}): counts per pixel, "
+            f"positive then negative, {h} x {w} px",
+            "preprocessing davis_areas: opening, closing and 8-connected area filter "
+            "(numpy; ONNX has no connected components), checked equal to the "
+            "detector's areas on every held-out frame",
+            "decision: slip when positive area > 0 and >= negative area (the graph)",
+        ],
+    )
+
+
+def _register_davis() -> None:
+    from slipkit.train.tasks.davis import DavisRelease
+
+    register_deployer(DavisRelease, _deploy_davis)
+
+
+_register_davis()
