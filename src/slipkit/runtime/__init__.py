@@ -8,7 +8,8 @@ Modules: :mod:`~slipkit.runtime.bundle` (format, :func:`load_bundle`,
 :func:`write_bundle`), :mod:`~slipkit.runtime.preprocessing` (the op registry),
 :mod:`~slipkit.runtime.session` (session options), :mod:`~slipkit.runtime.loop`
 (:class:`StreamLoop`), :mod:`~slipkit.runtime.sources` (replay, UDP),
-:mod:`~slipkit.runtime.tuning` (:func:`choose_session`), :mod:`~slipkit.runtime.cli`
+:mod:`~slipkit.runtime.sinks` (decisions out: UDP datagrams,
+JSON lines, :class:`DecisionReceiver`), :mod:`~slipkit.runtime.tuning` (:func:`choose_session`), :mod:`~slipkit.runtime.cli`
 (``slipkit-run``), :mod:`~slipkit.runtime.modules` (the import check).
 """
 
@@ -29,6 +30,14 @@ from slipkit.runtime.loop import LoopResult, StreamLoop, latency_summary
 from slipkit.runtime.modules import HEAVY_MODULES, heavy_modules_loaded
 from slipkit.runtime.preprocessing import OPS, register_op
 from slipkit.runtime.session import SessionSpec
+from slipkit.runtime.sinks import (
+    Decision,
+    DecisionReceiver,
+    JsonlSink,
+    UdpSink,
+    pack_decision,
+    unpack_decision,
+)
 from slipkit.runtime.sources import (
     ReplaySource,
     UdpSender,
@@ -49,13 +58,17 @@ __all__ = [
     "SCHEMA_VERSION",
     "Bundle",
     "BundleError",
+    "Decision",
+    "DecisionReceiver",
     "FrameError",
+    "JsonlSink",
     "LoopResult",
     "Manifest",
     "ReplaySource",
     "SessionSpec",
     "StreamLoop",
     "UdpSender",
+    "UdpSink",
     "UdpSource",
     "choose_session",
     "decode_frame",
@@ -64,7 +77,9 @@ __all__ = [
     "latency_summary",
     "load_bundle",
     "load_replay",
+    "pack_decision",
     "register_op",
+    "unpack_decision",
     "validate_manifest",
     "write_bundle",
 ]

@@ -7,6 +7,7 @@ Usage::
     slipkit-run exports/tactip_svm --udp 127.0.0.1:9000 --frames 1000
     slipkit-run exports/tactip_svm --udp 127.0.0.1:9000 --wait 0 --timeout 5
     slipkit-run exports/tactip_svm --choose-session      # measure session options
+    slipkit-run exports/tactip_svm --udp 0.0.0.0:9000 --send 192.168.1.20:9100 --jsonl
 
 Exit status: 0 success; 1 ``--check`` failed (p99 over the manifest's budget, or no
 decision was made), or ``--udp`` and no frame arrived within ``--wait``; 2 a bad bundle, replay file or argument: one line on stderr,
@@ -35,6 +36,7 @@ from slipkit.runtime.bundle import (
 from slipkit.runtime.errors import FrameError, OptionError
 from slipkit.runtime.loop import StreamLoop
 from slipkit.runtime.modules import heavy_modules_loaded
+from slipkit.runtime.sinks import Fanout, JsonlSink, UdpSink, parse_address
 from slipkit.runtime.sources import (
     DEFAULT_WAIT_S,
     MAX_RESYNC_AFTER,
@@ -113,6 +115,18 @@ def _parser() -> argparse.ArgumentParser:
         metavar="S",
         help="seconds the graph's first call may take when the bundle loads "
         f"(default {DEFAULT_DEADLINE_S:g}; at most {MAX_DEADLINE_S:g})",
+    )
+    p.add_argument(
+        "--send",
+        metavar="HOST:PORT",
+        help="send every decision as it is made as a UDP datagram (docs/deploy.md, "
+        "Decisions out; non-blocking: a failed send is counted, never waited on)",
+    )
+    p.add_argument(
+        "--jsonl",
+        action="store_true",
+        help="print every decision as it is made as one JSON line on stdout (flushed "
+        "per line), before the summary",
     )
     p.add_argument(
         "--check",
@@ -220,20 +234,8 @@ def _replay_line(info: dict[str, Any]) -> str:
     return f"replay: {info.get('trials')} trials{classes}; {held}"
 
 
-def _address(text: str) -> tuple[str, int]:
-    host, sep, port = text.rpartition(":")
-    if (
-        not sep
-        or not host
-        or not port.isascii()
-        or not port.isdigit()
-        or len(port) > 5
-        or int(port) > 65535
-    ):
-        raise OptionError(
-            "--udp", f"must be HOST:PORT (e.g. 127.0.0.1:9000); got {text!r}"
-        )
-    return host, int(port)
+def _address(text: str, option: str = "--udp") -> tuple[str, int]:
+    return parse_address(text, option)
 
 
 def _check_args(args: argparse.Namespace) -> None:
@@ -265,6 +267,8 @@ def _check_args(args: argparse.Namespace) -> None:
         )
     if args.udp is not None:
         _address(args.udp)
+    if args.send is not None and _address(args.send, "--send")[1] == 0:
+        raise OptionError("--send", f"port must be in [1, 65535]; got {args.send!r}")
     if args.json is not None:
         # Before any work: never over a dataset's, run's or bundle's own files.
         check_out_file(args.json, option="--json")
@@ -321,7 +325,19 @@ def run(argv: Sequence[str] | None = None) -> int:
         out = {"bundle": bundle.manifest.name, "session_candidates": rows}
         status = 0
     else:
-        loop = StreamLoop(bundle, io_binding=args.io_binding)
+        sinks: list[Any] = []
+        udp_sink: UdpSink | None = None
+        if args.send is not None:
+            host, port = _address(args.send, "--send")
+            try:
+                udp_sink = UdpSink(host, port)
+            except OptionError as exc:
+                raise OptionError("--send", exc.problem) from None
+            sinks.append(udp_sink)
+        if args.jsonl:
+            sinks.append(JsonlSink())
+        hook = None if not sinks else sinks[0] if len(sinks) == 1 else Fanout(*sinks)
+        loop = StreamLoop(bundle, io_binding=args.io_binding, on_decision=hook)
         replay_line: str | None = None
         if args.udp is not None:
             host, port = _address(args.udp)
@@ -371,8 +387,17 @@ def run(argv: Sequence[str] | None = None) -> int:
             replay_info = bundle.manifest.training.get("replay")
             if own and isinstance(replay_info, dict):
                 replay_line = _replay_line(replay_info)
+        if udp_sink is not None:
+            udp_sink.close()
         out = result.summary()
         out["source"] = name
+        if udp_sink is not None:
+            out["send"] = {
+                "to": args.send,
+                "sent": udp_sink.n_sent,
+                "errors": udp_sink.n_errors,
+                "last_error": udp_sink.last_error,
+            }
         out["io_binding"] = bool(args.io_binding)
         out["session"] = bundle.session_spec.to_json()
         for line in _summary_lines(out, Path(name).name if udp is None else name):
@@ -389,6 +414,12 @@ def run(argv: Sequence[str] | None = None) -> int:
                     if udp["last_error"]
                     else ""
                 )
+            )
+        if udp_sink is not None:
+            print(
+                f"send: {udp_sink.n_sent} decisions sent to {args.send}, "
+                f"{udp_sink.n_errors} send errors"
+                + (f" (last: {udp_sink.last_error})" if udp_sink.last_error else "")
             )
         status = 1 if args.check and not out["within_budget"] else 0
         if udp is not None and udp["ended"] == "wait":

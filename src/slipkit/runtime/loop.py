@@ -67,7 +67,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -264,6 +264,14 @@ class StreamLoop:
         Let NaN values through (only infinities are flagged) because the bundle's
         preprocessing or graph reads NaN as "missing". Default: True when every
         stream of ``frame.streams`` is in :data:`NAN_IS_MISSING_STREAMS`.
+    on_decision : callable, optional
+        Called on every decision, after its latency clock stops and its record is
+        stored, as ``on_decision(frame, timestamp, score, klass, slip, declared,
+        latency_ns)`` (frame index, sensor time s or NaN, score, class index or -1,
+        slip flag, debounced state, arrival -> decision ns): plain Python scalars,
+        no record object per frame. :mod:`slipkit.runtime.sinks` holds the UDP and
+        JSON lines sinks. Its time is not in the latency; an exception it raises
+        propagates out of :meth:`step`.
 
     Attributes
     ----------
@@ -284,6 +292,8 @@ class StreamLoop:
         max_gap_periods: float = 1.5,
         skip_gaps: bool = False,
         nan_is_missing: bool | None = None,
+        on_decision: Callable[[int, float, float, int, bool, bool, int], Any]
+        | None = None,
     ) -> None:
         if not (isinstance(max_gap_periods, int | float) and max_gap_periods > 1.0):
             raise ValueError(
@@ -291,6 +301,7 @@ class StreamLoop:
             )
         m = bundle.manifest
         self.bundle = bundle
+        self.on_decision = on_decision
         self._w = m.frame.window
         self._hop = m.frame.hop
         self._k = m.debounce_k
@@ -534,6 +545,16 @@ class StreamLoop:
         self._decl[i] = declared
         self._lat[i] = t1 - t0
         self._n = i + 1
+        if self.on_decision is not None:
+            self.on_decision(
+                seen - 1,
+                math.nan if timestamp is None else timestamp,
+                s,
+                cls,
+                slip,
+                declared,
+                t1 - t0,
+            )
         return declared
 
     def _store_odd(self, values: Any, p: int) -> str | None:
