@@ -209,3 +209,15 @@ def test_biotac_force_runs_on_the_hard_probe_with_analytic_and_learned() -> None
     assert "biotac_force_probe" == base.scene.name
     assert ["normals"] == list(comp.analytic)
     assert {"lwr", "mlp1", "mlp3"} == set(comp.estimators) - set(comp.analytic)
+
+
+def test_biotac_slip_type_holds_the_twist_rule_beside_the_window_nets() -> None:
+    """BioTac slip type: the hard lift by default, the analytic twist share beside the window nets."""
+    comp = _compose_comparison("biotac_slip_type")
+    assert "biotac_lift_slip_hard" == comp.scene.name
+    assert ["twist"] == list(comp.analytic)
+    assert (
+        "slipkit.baselines.slip_type.SlipTwistClassifier"
+        == comp.estimators.twist._target_
+    )
+    assert {"window_mlp", "window_cnn"} == set(comp.estimators) - set(comp.analytic)
