@@ -75,9 +75,9 @@ def test_op_areas_equal_detector_on_simulated_frames() -> None:
     assert expected[:, 0].max() > 0  # the release is seen
 
 
-@pytest.mark.slow
-def test_train_export_replay_check(tmp_path: Path) -> None:
-    """davis_release run -> slipkit export -> slipkit-run --check decides as the detector."""
+def test_train_export_replay_decides_as_the_detector(tmp_path: Path) -> None:
+    """davis_release run -> slipkit export -> slipkit-run on replay.npz: the detector's slip frames."""
+    from slipkit.baselines.davis import clean_frame
     from slipkit.export.commands import export_main
     from slipkit.runtime.cli import main
     from slipkit.train.commands import train_main
@@ -94,20 +94,25 @@ def test_train_export_replay_check(tmp_path: Path) -> None:
         _compose("export", [f"run={run}", f"out={out}", "choose_session=false"])
     )
     raw = json.loads((out / "manifest.json").read_text())
-    status = main(
-        [
-            str(out),
-            "--replay",
-            str(out / "replay.npz"),
-            "--json",
-            str(tmp_path / "r.json"),
-        ]
+    report = tmp_path / "report.json"
+    with pytest.raises(SystemExit) as done:
+        main([str(out), "--replay", str(out / "replay.npz"), "--json", str(report)])
+    summary = json.loads(report.read_text())
+    frames = np.load(out / "replay.npz")["frames"]
+    det = DavisPolarity()
+    kw = {k: getattr(det, k) for k in raw["preprocessing"][0] if k != "op"}
+    areas = np.array(
+        [[clean_frame(f[i] > 0, **kw).sum() for i in (0, 1)] for f in frames]
     )
-    report = json.loads((tmp_path / "r.json").read_text())
-    assert [[2, 180, 190], "davis_areas", 1.0] == [
+    expected_slip = int((classify(areas[:, 0], areas[:, 1]) == 2).sum())
+    assert [[2, 180, 190], "davis_areas", 1.0, 0] == [
         raw["frame"]["shape"],
         raw["preprocessing"][0]["op"],
         raw["training"]["parity"]["agreement"],
+        done.value.code,
     ]
-    assert 0 == status
-    assert report["frames"] > 0
+    assert [len(frames), expected_slip] == [
+        summary["decisions"],
+        summary["slip_decisions"],
+    ]
+    assert expected_slip > 0
