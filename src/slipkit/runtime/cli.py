@@ -286,6 +286,59 @@ def _replay(bundle: Bundle, path: Path | None) -> tuple[Any, Any, str]:
     return frames, times, str(path)
 
 
+def _run_source(
+    args: argparse.Namespace, bundle: Bundle, loop: StreamLoop
+) -> tuple[Any, str, dict[str, Any] | None, str | None]:
+    """Run the loop on --udp or the replay: (result, source name, udp counts, replay line)."""
+    udp: dict[str, Any] | None
+    replay_line: str | None = None
+    if args.udp is not None:
+        host, port = _address(args.udp)
+        try:
+            source = UdpSource(
+                host,
+                port,
+                bundle.manifest.frame.shape,
+                max_frames=args.frames,
+                timeout_s=args.timeout,
+                wait_s=args.wait,
+                resync_after=args.resync_after,
+            )
+        except OptionError as exc:
+            raise OptionError("--udp", exc.problem) from None
+        with source as src:
+            print(
+                f"listening on {src.where} (frames of {src.n_values} float32 values, format v1)",
+                file=sys.stderr,
+                flush=True,
+            )
+            result = loop.run(src)
+        name = src.where
+        udp = {
+            "received": src.n_received,
+            "rejected": src.n_rejected,
+            "lost": src.n_lost,
+            "resyncs": src.n_resyncs,
+            "last_error": src.last_error,
+            "ended": (
+                "wait" if src.waited_out else "timeout" if src.timed_out else "frames"
+            ),
+        }
+    else:
+        frames, times, name = _replay(bundle, args.replay)
+        if args.frames is not None:
+            frames, times = frames[: args.frames], times[: args.frames]
+        result = loop.run(ReplaySource(frames, times))
+        udp = None
+        own = bundle.replay_path is not None and (
+            args.replay is None or _same_file(args.replay, bundle.replay_path)
+        )
+        replay_info = bundle.manifest.training.get("replay")
+        if own and isinstance(replay_info, dict):
+            replay_line = _replay_line(replay_info)
+    return result, name, udp, replay_line
+
+
 def run(argv: Sequence[str] | None = None) -> int:
     """Parse arguments, run, print; return the exit status (see the module docstring)."""
     args = _parser().parse_args(argv)
@@ -337,58 +390,12 @@ def run(argv: Sequence[str] | None = None) -> int:
         if args.jsonl:
             sinks.append(JsonlSink())
         hook = None if not sinks else sinks[0] if len(sinks) == 1 else Fanout(*sinks)
-        loop = StreamLoop(bundle, io_binding=args.io_binding, on_decision=hook)
-        replay_line: str | None = None
-        if args.udp is not None:
-            host, port = _address(args.udp)
-            try:
-                source = UdpSource(
-                    host,
-                    port,
-                    bundle.manifest.frame.shape,
-                    max_frames=args.frames,
-                    timeout_s=args.timeout,
-                    wait_s=args.wait,
-                    resync_after=args.resync_after,
-                )
-            except OptionError as exc:
-                raise OptionError("--udp", exc.problem) from None
-            with source as src:
-                print(
-                    f"listening on {src.where} (frames of {src.n_values} float32 values, format v1)",
-                    file=sys.stderr,
-                    flush=True,
-                )
-                result = loop.run(src)
-            name = src.where
-            udp = {
-                "received": src.n_received,
-                "rejected": src.n_rejected,
-                "lost": src.n_lost,
-                "resyncs": src.n_resyncs,
-                "last_error": src.last_error,
-                "ended": (
-                    "wait"
-                    if src.waited_out
-                    else "timeout"
-                    if src.timed_out
-                    else "frames"
-                ),
-            }
-        else:
-            frames, times, name = _replay(bundle, args.replay)
-            if args.frames is not None:
-                frames, times = frames[: args.frames], times[: args.frames]
-            result = loop.run(ReplaySource(frames, times))
-            udp = None
-            own = bundle.replay_path is not None and (
-                args.replay is None or _same_file(args.replay, bundle.replay_path)
-            )
-            replay_info = bundle.manifest.training.get("replay")
-            if own and isinstance(replay_info, dict):
-                replay_line = _replay_line(replay_info)
-        if udp_sink is not None:
-            udp_sink.close()
+        try:
+            loop = StreamLoop(bundle, io_binding=args.io_binding, on_decision=hook)
+            result, name, udp, replay_line = _run_source(args, bundle, loop)
+        finally:
+            if udp_sink is not None:
+                udp_sink.close()
         out = result.summary()
         out["source"] = name
         if udp_sink is not None:

@@ -160,7 +160,7 @@ class UdpSink:
             raise OptionError("port", f"must be in [1, 65535]; got {port}")
         try:
             infos = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)
-        except (OSError, UnicodeError) as exc:
+        except (OSError, UnicodeError, ValueError) as exc:  # ValueError: a NUL
             raise OptionError("host", f"cannot resolve {host!r}: {exc}") from None
         family, kind, proto, _, addr = infos[0]
         self._sock = socket.socket(family, kind, proto)
