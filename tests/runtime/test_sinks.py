@@ -127,3 +127,28 @@ def test_bad_send_is_a_one_line_error(
     assert 2 == info.value.code
     assert 1 == len(err.strip().splitlines())
     assert re.match(r"slipkit-run: error: --send: ", err)
+
+
+def test_send_and_jsonl_together_carry_the_same_decisions(
+    case: LinearCase, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--send and --jsonl at once hand the same frames and scores to both sinks."""
+    with DecisionReceiver(port=0, timeout_s=2.0, max_records=17) as rx:
+        status = run(
+            [
+                str(case.path),
+                "--frames",
+                "20",
+                "--jsonl",
+                "--send",
+                f"127.0.0.1:{rx.port}",
+            ]
+        )
+        got = [(d.frame, d.score) for d in rx]
+    lines = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("{")]
+    rows = [json.loads(ln) for ln in lines]
+    assert 0 == status
+    assert [r["frame"] for r in rows] == [f for f, _ in got]
+    np.testing.assert_allclose(
+        [r["score"] for r in rows], [s for _, s in got], rtol=1e-6
+    )
