@@ -421,12 +421,14 @@ def label_components(img: NDArray[np.bool_]) -> tuple[NDArray[np.intp], int]:
     """8-connected components of a binary image: labels 1..n (0: background), n.
 
     Hand-written because ``scipy.ndimage.label`` is not available on the gripper PC
-    (see above). Vectorised label propagation with pointer jumping: every set pixel
-    starts with its own flat index as label, then repeatedly takes the smallest
-    label among itself and its 8 neighbours and follows ``label[label]`` (which
-    halves the chains), until nothing changes; each component ends with the index
-    of its first pixel in raster order. Labels are then renumbered 1..n in raster
-    order of each component's first pixel, as ``scipy.ndimage.label`` numbers them.
+    (see above). Vectorised over the set pixels only, in raster order: each pixel's
+    label is the position (in that order) of a pixel of its component. Labels start
+    as the first pixel of the pixel's horizontal run; then, until nothing changes,
+    each pixel takes the smallest label among itself and its six neighbours in the
+    rows above and below, each run takes the smallest label of its pixels, and each
+    label follows ``label[label]`` (pointer jumping, which halves the chains). Each
+    component ends labelled with its first pixel in raster order, so the components
+    are numbered 1..n in that order, as ``scipy.ndimage.label`` numbers them.
 
     Parameters
     ----------
@@ -440,35 +442,33 @@ def label_components(img: NDArray[np.bool_]) -> tuple[NDArray[np.intp], int]:
     """
     img = np.asarray(img, dtype=bool)
     h, w = img.shape
-    big = h * w
-    # A one-pixel False border: neighbours are plain slices, no wrap-around.
-    pad = np.zeros((h + 2, w + 2), dtype=bool)
-    pad[1:-1, 1:-1] = img
-    lab = np.full((h + 2, w + 2), big, dtype=np.intp)
-    flat = np.arange(big, dtype=np.intp).reshape(h, w)
-    lab[1:-1, 1:-1] = np.where(img, flat, big)
-    inner = lab[1:-1, 1:-1]
-    while True:
-        best = inner.copy()
-        for dr in (-1, 0, 1):
-            for dc in (-1, 0, 1):
-                if dr or dc:
-                    np.minimum(
-                        best, lab[1 + dr : h + 1 + dr, 1 + dc : w + 1 + dc], out=best
-                    )
-        best = np.where(img, best, big)
-        # Pointer jumping: a pixel takes its label's label (labels are flat indices).
-        on = best < big
-        best[on] = best.ravel()[best[on]]
-        if np.array_equal(best, inner):
-            break
-        inner[...] = best
-    roots = np.flatnonzero(img.ravel() & (inner.ravel() == np.arange(big)))
     out = np.zeros((h, w), dtype=np.intp)
-    if len(roots):
-        # roots are sorted flat indices: component k (raster order of its first
-        # pixel) gets label k + 1.
-        out[img] = np.searchsorted(roots, inner[img]) + 1
+    # A one-pixel False border: flat neighbours never wrap into the next row.
+    wp = w + 2
+    pad = np.zeros((h + 2, wp), dtype=bool)
+    pad[1:-1, 1:-1] = img
+    pix = np.flatnonzero(pad)
+    n = len(pix)
+    if n == 0:
+        return out, 0
+    starts = np.flatnonzero(np.diff(pix, prepend=-2) != 1)  # first pixel of each run
+    run_of = np.cumsum(np.diff(pix, prepend=-2) != 1) - 1
+    where = np.full(pad.size, n, dtype=np.intp)  # flat index -> position (n: unset)
+    where[pix] = np.arange(n)
+    offsets = np.array([-wp - 1, -wp, -wp + 1, wp - 1, wp, wp + 1])
+    nb = where[pix[:, None] + offsets]  # (n, 6) positions of the vertical neighbours
+    lab = np.append(starts[run_of], n)  # sentinel n: an unset neighbour
+    while True:
+        new = np.minimum(lab[:n], lab[nb].min(axis=1))
+        new = np.minimum.reduceat(new, starts)[run_of]
+        new = new[new]  # pointer jumping: labels are positions of pixels
+        if np.array_equal(new, lab[:n]):
+            break
+        lab[:n] = new
+    lab = lab[:n]
+    roots = np.flatnonzero(lab == np.arange(n))
+    rows, cols = np.divmod(pix, wp)
+    out[rows - 1, cols - 1] = np.searchsorted(roots, lab) + 1
     return out, len(roots)
 
 
