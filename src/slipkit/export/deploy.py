@@ -968,14 +968,15 @@ def davis_event_frames(
     """
     ev = np.asarray(events, dtype=np.float64).reshape(-1, 4)
     n = int(np.floor(ev[-1, 0] / frame_s)) + 1 if len(ev) else 0
-    frames = np.zeros((n, 2, int(height_px), int(width_px)))
+    frames: NDArray[np.float64] = np.zeros((n, 2, int(height_px), int(width_px)))
     if len(ev):
         k = np.floor(ev[:, 0] / frame_s).astype(np.intp)
         ch = (ev[:, 3] < 0).astype(np.intp)
         np.add.at(
             frames, (k, ch, ev[:, 2].astype(np.intp), ev[:, 1].astype(np.intp)), 1
         )
-    return frames, (np.arange(n) + 1.0) * frame_s
+    times = (np.arange(n, dtype=np.float64) + 1.0) * frame_s
+    return frames, times
 
 
 def _deploy_davis(
@@ -1027,8 +1028,8 @@ def _deploy_davis(
     pipeline = Pipeline([step], (1, 2, h, w), "manifest.json")
     trials = []
     for trial in dataset.subset([t for t in dataset.trial_ids if str(t) in test_ids]):
-        ev = trial.streams[task.stream].sort_values("t", kind="stable")
-        ev = ev[["t", "x", "y", "polarity"]].to_numpy(np.float64)
+        table = trial.streams[task.stream].sort_values("t", kind="stable")
+        ev = table[["t", "x", "y", "polarity"]].to_numpy(np.float64)
         frames, times = davis_event_frames(ev, frame_s=frame_s, height_px=h, width_px=w)
         if not len(frames):
             continue

@@ -530,7 +530,7 @@ class _DavisAreas:
 
     def __init__(self, params: dict[str, Any], in_shape: tuple[int, ...]) -> None:
         self.params = params
-        self.out_shape = (1, 2)
+        self.out_shape: tuple[int, ...] = (1, 2)
         self._buf = np.empty(self.out_shape)
 
     def __call__(self, x: Array) -> Array:
