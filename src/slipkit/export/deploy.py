@@ -59,6 +59,13 @@ Per task
     e.g. FSR: 10 samples every 5), no preprocessing (the detector's math is in the
     graph). Slip class ``1`` (the detector's positive class); parity is the
     detectors' own check on the held-out recordings.
+``DavisRelease``
+    Frame = one 10 ms event frame ``[2, H, W]`` (positive and negative counts per
+    pixel), window 1, hop 1. One preprocessing step, ``davis_areas`` (the detector's
+    opening, closing and connected-component area filter in numpy: ONNX has no op
+    for connected components), then a two-row graph for the polarity rule
+    (``export/davis.py``). Only the analytic ``DavisPolarity`` deploys; parity: the
+    op's areas equal the detector's on every held-out frame.
 """
 
 from __future__ import annotations
