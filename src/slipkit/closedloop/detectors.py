@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import time
+from abc import ABC, abstractmethod
 from collections.abc import Callable
 from pathlib import Path
 
@@ -21,7 +22,7 @@ import numpy as np
 from slipkit.closedloop.plant import PlantState
 
 
-class Detector:
+class Detector(ABC):
     """Contract: ``reset()`` per trial, ``decide(state, frame)`` per frame -> declared?
 
     ``frame`` is a callable that builds the sensor frame of ``state`` (only a detector
@@ -31,12 +32,12 @@ class Detector:
     name: str = "detector"
     kind: str = "bound"
 
-    def reset(self) -> None:
-        """Start a new trial."""
+    def reset(self) -> None:  # noqa: B027 - a bound detector keeps no state
+        """Start a new trial (nothing to forget by default)."""
 
+    @abstractmethod
     def decide(self, state: PlantState, frame: Callable[[], np.ndarray]) -> bool:
         """Whether slip is declared on this frame."""
-        raise NotImplementedError
 
     def latency_us(self) -> np.ndarray:
         """Per-decision compute latencies so far, us (empty for the bounds)."""
