@@ -69,28 +69,11 @@ def test_group_option_instantiates(group: str, option: str) -> None:
 
 def test_wheel_ships_the_config_tree(tmp_path: Path) -> None:
     """A built wheel carries every file of configs/ as slipkit/configs/."""
-    import subprocess
-    import sys
     import zipfile
 
-    root = Path(__file__).resolve().parents[1]
-    subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "pip",
-            "wheel",
-            "--no-deps",
-            "--no-build-isolation",
-            "-q",
-            "-w",
-            str(tmp_path),
-            str(root),
-        ],
-        check=True,
-        capture_output=True,
-    )
-    (wheel,) = tmp_path.glob("slipkit-*.whl")
+    from tests.wheel import build_wheel
+
+    wheel = build_wheel(tmp_path)
     names = set(zipfile.ZipFile(wheel).namelist())
     expected = {
         f"slipkit/configs/{p.relative_to(CONFIGS).as_posix()}"

@@ -457,27 +457,11 @@ def test_docs_print_the_shipped_schema() -> None:
 
 def test_wheel_ships_the_schema(tmp_path: Path) -> None:
     """A built wheel carries slipkit/data/schema/dataset-manifest.schema.json."""
-    import subprocess
-    import sys
     import zipfile
 
-    subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "pip",
-            "wheel",
-            "--no-deps",
-            "--no-build-isolation",
-            "-q",
-            "-w",
-            str(tmp_path),
-            str(ROOT),
-        ],
-        check=True,
-        capture_output=True,
-    )
-    (wheel,) = tmp_path.glob("slipkit-*.whl")
+    from tests.wheel import build_wheel
+
+    wheel = build_wheel(tmp_path)
     names = set(zipfile.ZipFile(wheel).namelist())
     assert "slipkit/data/schema/dataset-manifest.schema.json" in names
 

@@ -15,6 +15,7 @@ from tests.runtime.helpers import (
     pin_bundle,
     run_cli_reporting_modules,
 )
+from tests.wheel import build_wheel
 
 from slipkit.runtime.modules import heavy_modules_loaded
 
@@ -36,19 +37,7 @@ def test_runtime_extra_installs_and_runs_without_the_training_stack(
     tmp_path: Path,
 ) -> None:
     """A fresh venv with slipkit[runtime] holds no torch/sklearn/hydra/pandas and runs a bundle."""
-    _run(
-        sys.executable,
-        "-m",
-        "pip",
-        "wheel",
-        "--no-deps",
-        "--no-build-isolation",
-        "-q",
-        "-w",
-        str(tmp_path / "wheel"),
-        str(ROOT),
-    )
-    (wheel,) = (tmp_path / "wheel").glob("slipkit-*.whl")
+    wheel = build_wheel(tmp_path / "wheel")
     venv = tmp_path / "venv"
     _run(sys.executable, "-m", "venv", str(venv))
     python = str(venv / "bin" / "python")
@@ -91,18 +80,7 @@ def test_offline_install_from_a_wheelhouse_runs_a_bundle(tmp_path: Path) -> None
 
     house = tmp_path / "wheelhouse"
     # The wheel, as `make wheel` builds it.
-    _run(
-        sys.executable,
-        "-m",
-        "pip",
-        "wheel",
-        "--no-deps",
-        "--no-build-isolation",
-        "-q",
-        "-w",
-        str(house),
-        str(ROOT),
-    )
+    build_wheel(house)
     # The runtime's dependencies at the versions tested here, as `make wheelhouse`
     # downloads them (this machine reaches PyPI; the gripper PC need not).
     _run(
