@@ -12,12 +12,18 @@ TORCH  := torch==2.13.0
 help: ## list the targets
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "} {printf "  %-10s %s\n", $$1, $$2}'
 
+# One line per step, and pip's own progress (no --quiet): the first install takes minutes.
 $(STAMP): pyproject.toml
+	@echo "[install 1/4] virtual environment $(VENV)"
 	$(PYTHON) -m venv $(VENV)
+	@echo "[install 2/4] pip upgrade"
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet $(TORCH)
-	$(BIN)/python -m pip install --quiet -e '.[train,dev]'
+	@echo "[install 3/4] $(TORCH)"
+	$(BIN)/python -m pip install --progress-bar on $(TORCH)
+	@echo "[install 4/4] slipkit[train,dev] (editable)"
+	$(BIN)/python -m pip install --progress-bar on -e '.[train,dev]'
 	touch $(STAMP)
+	@echo "[install] done: $(VENV)"
 
 install: $(STAMP) ## create .venv and install slipkit with its dev tools
 
