@@ -10,6 +10,7 @@ import pytest
 from scipy import stats
 
 from slipkit.compare.aggregate import aggregate
+from slipkit.compare.table import block_p99, choose_deploy, seed_table
 from slipkit.errors import SlipkitError
 
 
@@ -107,3 +108,68 @@ def test_bad_arguments_name_the_fault(kwargs: dict, message: str) -> None:
     with pytest.raises(SlipkitError) as err:
         aggregate(_runs(), **kwargs)
     assert message in str(err.value)
+
+
+def test_block_p99_ignores_a_stall_in_one_block() -> None:
+    """A burst of slow decisions inside one of five blocks leaves the checked p99 unchanged."""
+    base = np.tile(np.arange(1.0, 101.0), 20)  # 2000 decisions, every block alike
+    stalled = base.copy()
+    stalled[100:160] = 5000.0  # a 60-decision stall in the first block
+    assert block_p99(base) == block_p99(stalled)
+
+
+def test_block_p99_of_few_decisions_is_the_plain_p99() -> None:
+    """With fewer decisions than two per block, the plain p99 is returned."""
+    lat = np.arange(1.0, 8.0)
+    assert np.percentile(lat, 99) == block_p99(lat)
+
+
+def _seed_rows() -> pd.DataFrame:
+    rows = []
+    for seed, (a, b) in enumerate([(0.90, 0.80), (0.80, 0.82), (0.85, 0.84)]):
+        for est, acc, p99, export in (("a", a, 60.0, "ok"), ("b", b, 20.0, "ok")):
+            rows.append(
+                {
+                    "estimator": est,
+                    "kind": "learned",
+                    "class": "X",
+                    "balanced_accuracy": acc,
+                    "p50_us": p99 / 2,
+                    "p99_us": p99,
+                    "budget_p99_us": 50.0,
+                    "export": export,
+                    "seed": seed,
+                }
+            )
+    return pd.DataFrame(rows)
+
+
+def test_seed_table_averages_and_keeps_the_spread() -> None:
+    """One row per estimator: the mean primary as its score, the std beside it, n_seeds."""
+    lat = {"a": np.full(100, 40.0), "b": np.full(100, 20.0)}
+    df = seed_table(_seed_rows(), lat, "balanced_accuracy").set_index("estimator")
+    assert pytest.approx([0.85, 0.82]) == df["score"].tolist()
+    assert pytest.approx(0.05) == df.loc["a", "balanced_accuracy_std"]
+    assert [3, 3] == df["n_seeds"].tolist()
+
+
+def test_seed_table_checks_the_budget_on_pooled_latencies() -> None:
+    """The pooled block p99 is checked, not the per-seed p99s: 'a' (60 us each) meets 50 us on 40 us."""
+    lat = {"a": np.full(100, 40.0), "b": np.full(100, 20.0)}
+    df = seed_table(_seed_rows(), lat, "balanced_accuracy")
+    choice = choose_deploy(df)
+    assert ("a", 40.0) == (
+        choice.row["estimator"],
+        df.set_index("estimator").loc["a", "p99_us"],
+    )
+    assert (True, True) == tuple(df["within_budget"])
+
+
+def test_seed_table_export_fails_if_any_seed_failed() -> None:
+    """An estimator whose bundle failed on one seed is reported with that seed's reason."""
+    rows = _seed_rows()
+    rows.loc[(rows["estimator"] == "a") & (rows["seed"] == 1), "export"] = (
+        "not exportable: x"
+    )
+    df = seed_table(rows, {"b": np.full(10, 20.0)}, "balanced_accuracy")
+    assert ["not exportable: x", "ok"] == df["export"].tolist()
