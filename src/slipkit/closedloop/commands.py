@@ -2,7 +2,9 @@
 
 Composes ``configs/closedloop.yaml``; the scenario file ``configs/closedloop/<family>.yaml``
 names the scene (plant parameters and sensor effects), the controller and actuator, the
-speeds, the detectors and the runs they come from. For each run the command trains the
+conditions (TacTip: retraction speeds), the detectors and the runs they come from; the
+family's plant, sensor mapping, controller and trial drawing are its registered scenario
+(:mod:`slipkit.closedloop.scenarios`; ``family:`` in the file, default its ``name``). For each run the command trains the
 detector with ``slipkit train``'s own function on the family's experiment (once per
 command run, kept under ``<out>/runs/``), exports it with ``slipkit export``'s function
 once per debounce (``<out>/bundles/``), and runs every trial with the bundle deciding
@@ -38,8 +40,8 @@ from slipkit.closedloop.detectors import (
     OracleDetector,
 )
 from slipkit.closedloop.report import markdown_table, summarize, write_report
-from slipkit.closedloop.run import run_detector, speed_grid
-from slipkit.closedloop.tactip import check_scenario
+from slipkit.closedloop.run import run_detector
+from slipkit.closedloop.scenarios import ClosedLoopScenario, get_scenario
 from slipkit.errors import SlipkitError
 from slipkit.train.runs import new_run_dir
 
@@ -74,6 +76,11 @@ def load_scenario(cfg: DictConfig) -> DictConfig:
         if cfg.get(key) is not None:
             scen[key] = int(cfg[key])
     return scen
+
+
+def scenario_of(scen: DictConfig) -> ClosedLoopScenario:
+    """The registered scenario of ``scen`` (its ``family``, default its ``name``)."""
+    return get_scenario(str(scen.get("family") or scen.name))
 
 
 def _command(cfg: DictConfig) -> str:
@@ -211,11 +218,11 @@ def run_scenario(
     if not isinstance(plain, dict):
         raise SlipkitError("closedloop.plant: expected a mapping of plant parameters")
     plant = {str(k): v for k, v in plain.items()}
-    check_scenario(plant)
+    scenario = scenario_of(scen)
     scene_cfg = _compose("train", [f"scene={scen.scene}"]).scene
     scene = build_scene(scene_cfg)
-    sp = scen.speeds
-    speeds = speed_grid(float(sp.lo), float(sp.hi), int(sp.n))
+    scenario.check(scen, scene)
+    conditions = scenario.conditions(scen)
     start = time.perf_counter()
     detectors, info = build_detectors(
         scen, folder, warmup=int(cfg.warmup), seed=int(cfg.train_seed)
@@ -226,19 +233,21 @@ def run_scenario(
     for det in detectors:
         t0 = time.perf_counter()
         outcomes = run_detector(
+            scenario,
             scene,
             det,
             plant,
             seeds=seeds,
-            speeds=speeds,
-            trials_per_speed=int(scen.trials_per_speed),
+            conditions=conditions,
+            trials_per_condition=int(scen.trials_per_speed),
         )
         timings["loop_s"][det.name] = time.perf_counter() - t0
         rows.extend(o.row() for o in outcomes)
         latencies[det.name] = det.latency_us()
     results = pd.DataFrame(rows)
     summary = summarize(results, info, latencies)
-    timings["speeds_mm_s"] = speeds
+    timings["conditions"] = conditions
+    timings["condition_label"] = scenario.condition_label
     return results, summary, timings
 
 

@@ -93,11 +93,16 @@ def summarize(
     return pd.DataFrame(rows)
 
 
-def per_speed(results: pd.DataFrame, detectors: Sequence[str]) -> pd.DataFrame:
-    """Caught % and mean slip at arrest (mm, caught objects) per speed, for ``detectors``."""
+def per_condition(
+    results: pd.DataFrame, detectors: Sequence[str], label: str = "speed (mm/s)"
+) -> pd.DataFrame:
+    """Caught % and mean slip at arrest (mm, caught objects) per condition, for ``detectors``.
+
+    ``label`` heads the condition column (the scenario's ``condition_label``).
+    """
     rows = []
-    for speed, g in results.groupby("speed_mm_s"):
-        row: dict[str, Any] = {"speed (mm/s)": f"{speed:g}"}
+    for value, g in results.groupby("condition"):
+        row: dict[str, Any] = {label: f"{value:g}"}
         for det in detectors:
             d = g[g["detector"] == det]
             if d.empty:
@@ -259,7 +264,8 @@ def write_report(
         "mean +- std over seeds)",
     )
     bundles = [str(d) for d in summary.loc[summary["kind"] == "bundle", "detector"]]
-    speeds = per_speed(results, [*bundles, "oracle"])
+    label = str(timings.get("condition_label", "condition"))
+    speeds = per_condition(results, [*bundles, "oracle"], label)
     plant = OmegaConf.to_container(scenario.plant, resolve=True)
     loop = timings.get("loop_s", {})
     lines = [
@@ -267,9 +273,9 @@ def write_report(
         "",
         f"Command: `{command}`",
         "",
-        f"Scene `{scenario.scene}`; plant {plant}; speeds (mm/s) "
-        f"{', '.join(f'{s:g}' for s in timings.get('speeds_mm_s', []))}; "
-        f"{int(scenario.trials_per_speed)} trials per speed and seed; seeds {list(seeds)}.",
+        f"Scene `{scenario.scene}`; plant {plant}; {label} "
+        f"{', '.join(f'{s:g}' for s in timings.get('conditions', []))}; "
+        f"{int(scenario.trials_per_speed)} trials per condition and seed; seeds {list(seeds)}.",
         "",
         "Mean +- std over seeds (each seed's value is the mean over its trials).",
         "",
@@ -277,7 +283,7 @@ def write_report(
         "",
         f"![slip against delay and compute]({png.name})",
         "",
-        "## Per speed (all seeds pooled)",
+        f"## Per {label.split(' (')[0]} (all seeds pooled)",
         "",
         speeds.to_markdown(index=False, floatfmt=".1f"),
         "",

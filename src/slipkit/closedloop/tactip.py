@@ -19,12 +19,16 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
-from functools import cached_property
+from functools import cached_property, partial
 from typing import Any
 
 import numpy as np
+from omegaconf import DictConfig, OmegaConf
 
-from slipkit.closedloop.plant import PlantState
+from slipkit.closedloop.detectors import Detector
+from slipkit.closedloop.plant import Actuator, GraspPlant, PlantState
+from slipkit.closedloop.run import Outcome, speed_grid
+from slipkit.closedloop.scenarios import register_scenario
 from slipkit.errors import SlipkitError
 from slipkit.physics.tactip import normal_force_N
 from slipkit.sim.core import (
@@ -237,3 +241,166 @@ def check_scenario(plant: Mapping[str, Any]) -> None:
             raise SlipkitError(
                 f"closedloop.plant.{key}: expected a finite number > 0; got {value!r}"
             )
+
+
+def run_tactip_trial(
+    scene: Scene,
+    detector: Detector,
+    plant_cfg: Mapping[str, Any],
+    *,
+    seed: int,
+    condition_index: int,
+    trial: int,
+    condition: float,
+) -> Outcome:
+    """One TacTip gravity-drop trial with ``detector`` in the loop.
+
+    Parameters
+    ----------
+    scene : Scene
+        The TacTip scene (model draws the object; effects make the pins).
+    detector : Detector
+        Decides per frame.
+    plant_cfg : mapping
+        ``latency_s``, ``tau_s`` (actuator, s), ``catch_mm_s`` (arm speed back in,
+        mm/s), ``catch_indentation_mm`` (where the arm stops pressing, mm),
+        ``travel_mm`` (slide that loses the object, mm), ``onset_s``
+        (``[lo, hi]``, s: when the open-loop retraction would start the slip),
+        ``post_s`` (s simulated after that onset at most), ``substeps``.
+    seed, condition_index, trial : int
+        The draw (``default_rng([seed, condition_index, trial])``).
+    condition : float
+        Retraction speed, mm/s.
+    """
+    speed_mm_s = float(condition)
+    model = scene.model
+    if not isinstance(model, TacTipGravityDrop):
+        raise SlipkitError(
+            f"closedloop.scene: the TacTip closed loop needs a TacTip gravity-drop "
+            f"scene; got {type(model).__name__}"
+        )
+    rng = np.random.default_rng([int(seed), int(condition_index), int(trial)])
+    lo, hi = (float(v) for v in plant_cfg["onset_s"])
+    params, tr = draw_trial(model, rng, speed_mm_s=speed_mm_s, onset_s=(lo, hi))
+    sensor = TacTipSensor(scene, tr, rng)
+    actuator = Actuator(
+        float(plant_cfg["latency_s"]), float(plant_cfg["tau_s"]), initial=-speed_mm_s
+    )
+    plant = GraspPlant(
+        mass_kg=float(params["mass_kg"]),
+        mu_s=tr.mu_s,
+        mu_k=tr.mu_k,
+        stiffness=tr.stiffness,
+        indentation_mm=float(tr.indentation(np.zeros(1))[0]),
+        arm_mm_s=-speed_mm_s,
+        actuator=actuator,
+        travel_mm=float(plant_cfg["travel_mm"]),
+        max_indentation_mm=float(plant_cfg["catch_indentation_mm"]),
+        rate_hz=model.rate_hz,
+        substeps=int(plant_cfg.get("substeps", 8)),
+    )
+    detector.reset()
+    dt = 1.0 / model.rate_hz
+    t_end = tr.onset_s + float(plant_cfg["post_s"])
+    declared = math.nan
+    frames = 0
+    peak, impulse = 0.0, 0.0
+    state = plant.state
+    while state.t < t_end and not state.dropped:
+        if math.isnan(declared):
+            frames += 1
+            if detector.decide(state, partial(sensor.frame, state)):
+                declared = state.t
+                actuator.command(state.t, float(plant_cfg["catch_mm_s"]))
+        else:
+            slipped = not math.isnan(state.onset_s)
+            if slipped and not state.sliding:
+                break  # arrested
+            if not slipped and state.t >= tr.onset_s:
+                break  # a false alarm held the object past its open-loop onset
+            if not slipped:
+                extra = state.normal_N - open_loop_force(tr, state.t)
+                peak = max(peak, extra)
+                impulse += max(extra, 0.0) * dt
+        state = plant.step()
+    onset = state.onset_s
+    false_alarm = not math.isnan(declared) and (math.isnan(onset) or declared < onset)
+    delay = (
+        (declared - onset) * 1e3
+        if not (math.isnan(declared) or math.isnan(onset) or false_alarm)
+        else math.nan
+    )
+    dropped = state.dropped or state.sliding
+    travel = float(plant_cfg["travel_mm"])
+    return Outcome(
+        detector=detector.name,
+        seed=int(seed),
+        condition_index=int(condition_index),
+        trial=int(trial),
+        condition=float(speed_mm_s),
+        mass_kg=float(params["mass_kg"]),
+        object=str(params["object"]),
+        onset_s=onset,
+        declared_s=declared,
+        false_alarm=bool(false_alarm),
+        delay_ms=delay,
+        arrest_s=state.arrest_s,
+        slip_mm=travel if dropped else float(state.drop_mm),
+        dropped=bool(dropped),
+        onset_to_arrest_ms=(
+            (state.arrest_s - onset) * 1e3
+            if not (dropped or math.isnan(state.arrest_s))
+            else math.nan
+        ),
+        extra_force_N=float(peak) if false_alarm else 0.0,
+        extra_impulse_Ns=float(impulse) if false_alarm else 0.0,
+        frames=frames,
+    )
+
+
+@register_scenario("tactip")
+class TacTipScenario:
+    """The TacTip gravity drop (module docstring): retraction speeds, one-shot catch."""
+
+    condition_label = "speed (mm/s)"
+
+    def check(self, scen: DictConfig, scene: Scene) -> None:
+        """Refuse plant parameters that cannot run and a scene that is not the gravity drop."""
+        plain = OmegaConf.to_container(scen.plant, resolve=True)
+        if not isinstance(plain, dict):
+            raise SlipkitError(
+                "closedloop.plant: expected a mapping of plant parameters"
+            )
+        check_scenario({str(k): v for k, v in plain.items()})
+        if not isinstance(scene.model, TacTipGravityDrop):
+            raise SlipkitError(
+                f"closedloop.scene: the TacTip closed loop needs a TacTip gravity-drop "
+                f"scene; got {type(scene.model).__name__}"
+            )
+
+    def conditions(self, scen: DictConfig) -> list[float]:
+        """``speeds.n`` log-spaced retraction speeds from ``speeds.lo`` to ``speeds.hi``, mm/s."""
+        sp = scen.speeds
+        return speed_grid(float(sp.lo), float(sp.hi), int(sp.n))
+
+    def run_trial(
+        self,
+        scene: Scene,
+        detector: Detector,
+        plant: Mapping[str, Any],
+        *,
+        seed: int,
+        condition_index: int,
+        trial: int,
+        condition: float,
+    ) -> Outcome:
+        """One gravity-drop trial (:func:`run_tactip_trial`)."""
+        return run_tactip_trial(
+            scene,
+            detector,
+            plant,
+            seed=seed,
+            condition_index=condition_index,
+            trial=trial,
+            condition=condition,
+        )
