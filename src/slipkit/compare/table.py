@@ -331,29 +331,31 @@ def seed_table(
         if c not in _NOT_AVERAGED
     ]
     agg = aggregate(per_seed, ["estimator"], numeric, confidence=confidence)
-    agg = agg.set_index("estimator")
+    stats = {str(r["estimator"]): r for r in agg.to_dict("records")}
     rows: list[dict[str, object]] = []
     for est, g in per_seed.groupby("estimator", sort=False):
         first = g.iloc[0]
         bad = [str(e) for e in g["export"] if e != "ok"]
+        st = stats[str(est)]
         row: dict[str, object] = {
             "estimator": est,
             "kind": first["kind"],
             "class": first["class"],
             "export": bad[0] if bad else "ok",
-            "n_seeds": int(agg.loc[est, "n"]),
+            "n_seeds": int(st["n"]),
         }
         for c in numeric:
-            row[c] = agg.loc[est, f"{c}_mean"]
-            row[f"{c}_std"] = agg.loc[est, f"{c}_std"]
-            row[f"{c}_ci"] = agg.loc[est, f"{c}_ci"]
+            for part in ("std", "ci"):
+                row[f"{c}_{part}"] = st[f"{c}_{part}"]
+            row[c] = st[f"{c}_mean"]
         lat = np.asarray(latencies.get(str(est), np.zeros(0)), dtype=np.float64)
         if not bad and len(lat):
-            row["p50_us"] = float(np.percentile(lat, 50))
-            row["p99_us"] = block_p99(lat)
+            p99 = block_p99(lat)
             budget = float(first.get("budget_p99_us", math.nan))
+            row["p50_us"] = float(np.percentile(lat, 50))
+            row["p99_us"] = p99
             row["within_budget"] = (
-                bool(row["p99_us"] <= budget) if math.isfinite(budget) else None
+                bool(p99 <= budget) if math.isfinite(budget) else None
             )
         else:
             row["p50_us"] = row["p99_us"] = math.nan
