@@ -255,15 +255,15 @@ def test_per_recording_polarity_detects_either_wiring_and_streams_alike(
             assert (batch >= alpha).tolist() == dec.tolist()
 
 
-def test_per_recording_polarity_does_not_export() -> None:
-    """A per-recording sign has no graph: a clear ExportError."""
+def test_per_recording_polarity_exports_with_the_press_sign_op() -> None:
+    """A per-recording sign exports: the graph asks the runtime for press_sign first
+    (parity: tests/export/test_fsr_press_sign.py)."""
     from slipkit.export.detectors import export_fsr_touch_slip
-    from slipkit.export.registry import ExportError
 
     X, y, seg = stack(fsr_trials(100, 2, polarity="rising", slide=True))
     det = FSRTouchSlip(threshold=8.0, polarity="per_recording").fit(X, y, segments=seg)
-    with pytest.raises(ExportError, match="per_recording"):
-        export_fsr_touch_slip(det)
+    graph = export_fsr_touch_slip(det)
+    assert ["press_sign"] == [s["op"] for s in graph.preprocessing]
 
 
 def test_force_input_refuses_a_calibration_of_the_other_wiring() -> None:

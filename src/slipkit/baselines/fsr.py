@@ -43,7 +43,12 @@ silently never fire. Slip is the opposite of a press: a voltage moving back towa
 rest (rising for ``"falling"``, falling for ``"rising"``), a falling force. For
 ``input="force"`` the calibration must turn a press into a rising force; a calibration
 that does not match the wiring is refused. ``fit`` also records ``rest_V_``, the median
-rest voltage of the training recordings, the constant the ONNX graph's touch gate uses.
+rest voltage of the training recordings, the constant the ONNX graph's touch gate uses
+for one fixed wiring. With ``"per_recording"`` the deployed detector learns each stream's
+rest level and sign on the gripper PC instead: the runtime op ``press_sign``
+(:mod:`slipkit.runtime.preprocessing`) latches them at the first press as this class does,
+and the graph reads the sign-normalised signal
+(:func:`slipkit.export.detectors.export_fsr_touch_slip`).
 
 **Confirmation (``confirm_events``, a slipkit addition against impulsive bumps).** One
 sharp external bump (tens of % of the holding force in a millisecond) gives one large
@@ -53,7 +58,7 @@ derivative, as large as a slip event's; a slide is a *train* of stick-slip event
 it, so it is confirmed ``peak_gap_s`` later), and the score is the ``k``-th largest event
 within the last ``confirm_window_s``: ``score >= alpha`` means "at least ``k`` separate
 events of at least ``alpha`` within the window". ``k = 1`` (the default) is the paper's
-detector exactly. The ``fsr_robust`` config uses ``k = 2`` over 0.3 s.
+detector exactly. The ``fsr_robust`` config uses ``k = 3`` over 0.4 s.
 """
 
 from __future__ import annotations
@@ -122,8 +127,8 @@ class FSRTouchSlip(StreamDetector):
     polarity : {"auto", "falling", "rising", "per_recording"}
         How the conditioned voltage moves when the FSR is pressed: ``"falling"`` (the
         paper's divider), ``"rising"`` (the other common wiring), ``"per_recording"``
-        (each recording's first press sets its direction; voltage input, no ONNX
-        graph), or ``"auto"``: learned by ``fit`` from the training recordings (which
+        (each recording's first press sets its direction; voltage input; deployed
+        with the runtime op ``press_sign`` before the graph), or ``"auto"``: learned by ``fit`` from the training recordings (which
         must include a press; recordings of both wirings give ``"per_recording"`` and a
         :class:`PolarityWarning`).
     confirm_events : int
@@ -326,7 +331,8 @@ class FSRTouchSlip(StreamDetector):
                 f"press direction: recordings {voted['falling'][:10]} fall, "
                 f"{voted['rising'][:10]} rise under a press (0-based, in segment order); "
                 "using polarity 'per_recording' (each recording's first press sets its "
-                "sign; no ONNX graph). Set polarity to silence this",
+                "sign; deployed with the runtime's press_sign op). Set polarity to "
+                "silence this",
                 PolarityWarning,
                 stacklevel=3,
             )

@@ -57,8 +57,10 @@ Per task
     Frame = one raw sample of ``task.stream`` (``task.channels``); window and hop are
     what the detector's graph needs (:class:`slipkit.export.detectors.DetectorGraph`,
     e.g. FSR: 10 samples every 5), no preprocessing (the detector's math is in the
-    graph). Slip class ``1`` (the detector's positive class); parity is the
-    detectors' own check on the held-out recordings.
+    graph), except for an FSR detector whose polarity is ``per_recording``: one step,
+    ``press_sign``, latches the stream's rest level and wiring sign at its first
+    press. Slip class ``1`` (the detector's positive class); parity is the
+    detectors' own check on the held-out recordings (through that step).
 ``DavisRelease``
     Frame = one 10 ms event frame ``[2, H, W]`` (positive and negative counts per
     pixel), window 1, hop 1. One preprocessing step, ``davis_areas`` (the detector's
@@ -832,10 +834,31 @@ def _deploy_detection(
             f"fixed pressure baseline {base:.4g} counts RMS (median of the training "
             "recordings; the batch detector measures one per recording)"
         )
+    steps: list[dict[str, Any]] = []
+    from slipkit.baselines.fsr import FSRTouchSlip
+
+    if (
+        isinstance(run.model, FSRTouchSlip)
+        and run.model.input == "voltage"
+        and getattr(run.model, "polarity_", None) == "per_recording"
+    ):
+        # Training wirings of both signs: the runtime learns each stream's rest level
+        # and press direction at its first press (the press_sign op), as the batch
+        # detector does per recording; the graph reads the sign-normalised signal.
+        from slipkit.export.detectors import fsr_press_sign_step
+
+        steps = [fsr_press_sign_step(run.model)]
+        notes.append(
+            "press_sign: the stream's rest level (mean of its first "
+            f"{run.model.rest_samples} samples) and wiring sign (its first block mean "
+            f"further than {steps[0]['delta']:g} V from rest) latched on the gripper "
+            "PC, as the detector's per-recording polarity; start the loop (or reset "
+            "it) at rest before each grasp"
+        )
     return Deployment(
         # window and hop come from the graph (DetectorGraph.window / .hop)
         frame=_frame([stream], channels, 1, 1, rate),
-        preprocessing=[],
+        preprocessing=steps,
         export_options=export_options,
         positive=positive,
         debounce_k=int(options.get("debounce_k") or 1),

@@ -15,7 +15,12 @@ the only rounding that differs from the batch detector is the float32 input.
   block means, their backward difference over the cycle time, one sign, the touch
   gate against a **fixed rest voltage** (a calibration constant in the graph; the
   batch detector averages each recording's first 10 samples). Decision instants are
-  block ends: ``hop = block`` (5).
+  block ends: ``hop = block`` (5). With ``polarity_ == "per_recording"`` (training
+  wirings of both signs) the rest level and the sign come from the stream instead:
+  the runtime op ``press_sign`` latches them at the first press, as the batch
+  detector does per recording, and the graph reads ``sign * (v - v_rest)`` with rest
+  0 and the paper's sign (:func:`fsr_press_sign_step`); its rest and gate are then
+  the recording's own, not a constant.
 * :class:`~slipkit.baselines.biotac.ForceDerivative` -- ``W = span + 1`` (4):
   ``Ft = sqrt(fx^2 + fy^2)`` (or ``Ft`` itself) at both ends, ``-(Ft[-1] - Ft[0])
   rate / span``; the same numbers as the batch detector.
@@ -59,7 +64,7 @@ the graph, as its batch form (``numpy.nan_to_num``) does.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -111,6 +116,11 @@ class DetectorGraph(ExportedGraph):
         Samples between calls: the runtime calls the graph when the window is first
         full (sample ``window - 1``) and every ``hop`` samples after, counted from
         the recording's first sample (the runtime loop's ``frame.hop``).
+    preprocessing : tuple of dict
+        Runtime op steps (:data:`slipkit.runtime.preprocessing.OPS`) that turn the
+        raw window into the graph's input (the manifest's ``preprocessing``); empty:
+        the graph reads the raw samples. Stateful steps see every runtime call of a
+        recording from its first, in order.
     first_decision : int
         0-based sample of the recording at which the batch detector first decides
         (its warm-up ends); earlier calls have no batch counterpart.
@@ -123,15 +133,18 @@ class DetectorGraph(ExportedGraph):
     hop: int = 1
     first_decision: int = 0
     strict: bool = False
+    preprocessing: tuple[dict[str, Any], ...] = ()
 
     def describe(self) -> dict[str, Any]:
-        """The registry's description plus ``frame`` (window, hop, first_decision)."""
+        """The registry's description plus ``frame`` (window, hop, first_decision)
+        and the runtime ``preprocessing`` steps the graph needs before it."""
         out = super().describe()
         out["frame"] = {
             "window": self.window,
             "hop": self.hop,
             "first_decision": self.first_decision,
         }
+        out["preprocessing"] = [dict(s) for s in self.preprocessing]
         return out
 
     def instants(self, n: int) -> NDArray[np.int64]:
@@ -321,11 +334,18 @@ def export_fsr_touch_slip(
         sample (14 for 10 rest samples and 5-sample blocks).
     """
     check_is_fitted(detector, "threshold_")
-    if detector.input == "voltage" and detector._polarity == "per_recording":
+    per_recording = (
+        detector.input == "voltage" and detector._polarity == "per_recording"
+    )
+    if per_recording and rest is not None:
         raise ExportError(
-            "FSR export: polarity 'per_recording' (training data of both wirings) has no "
-            "graph: the touch gate needs one rest voltage and one slip sign; fit one "
-            "detector per wiring (polarity 'falling' or 'rising')"
+            "FSR export: polarity 'per_recording' takes each recording's rest level "
+            "from the stream (the press_sign op); rest=... has no meaning here"
+        )
+    if per_recording and not gate:
+        raise ExportError(
+            "FSR export: polarity 'per_recording' needs the touch gate (gate=True): "
+            "before its first press a recording has no sign"
         )
     confirm = int(detector.confirm_events) > 1
     if confirm and not gate:
@@ -339,13 +359,17 @@ def export_fsr_touch_slip(
     # gap on each side) plus the first one's predecessor
     n_blocks = wb + 2 * gap + 1 if confirm else 2
     w = n_blocks * b
-    sign = detector._sign
     polarity = detector._polarity
+    # per recording: the press_sign op feeds sign * (v - rest), a falling-wiring signal
+    # at rest 0, so the graph is the paper's with slip sign +1 and rest 0
+    sign = 1.0 if per_recording else detector._sign
     per_s = detector._per_s
     delta = float(getattr(detector, "delta_", detector._delta))
     coeffs = detector._coeffs() if detector.input == "force" else None
     fitted_rest = float(getattr(detector, "rest_V_", math.nan))
-    if rest is not None:
+    if per_recording:
+        v_rest = 0.0
+    elif rest is not None:
         v_rest = float(rest)
     elif math.isfinite(fitted_rest):
         v_rest = fitted_rest
@@ -372,9 +396,9 @@ def export_fsr_touch_slip(
             acc = g.op("Mul", g.op("Add", acc, g.const(p, np.float64)), v)
         v = g.op("Add", acc, g.const(coeffs[-1], np.float64), stem="force")
     if confirm:
-        score64 = _fsr_confirmed(g, v, detector, n_blocks, rest_sig, delta)
+        score64 = _fsr_confirmed(g, v, detector, n_blocks, rest_sig, delta, sign)
         return _fsr_graph_out(
-            g, inp, score64, detector, w, v_rest, rest_sig, delta, gate, polarity
+            g, inp, score64, detector, w, v_rest, rest_sig, delta, gate, polarity, sign
         )
     blocks = g.op("Reshape", v, g.const([-1, 2, b], np.int64), stem="blocks")
     means = g.op(
@@ -401,7 +425,7 @@ def export_fsr_touch_slip(
         ok = g.op("And", ok, touched)
     score64 = g.op("Where", ok, deriv, g.const(NO_SCORE, np.float64), stem="score64")
     return _fsr_graph_out(
-        g, inp, score64, detector, w, v_rest, rest_sig, delta, gate, polarity
+        g, inp, score64, detector, w, v_rest, rest_sig, delta, gate, polarity, sign
     )
 
 
@@ -417,11 +441,13 @@ def _fsr_confirmed(
     n_blocks: int,
     rest_sig: float,
     delta: float,
+    sign: float,
 ) -> str:
     """Nodes of the confirmed score: the ``confirm_events``-th largest derivative peak
-    among the ``_confirm_blocks`` candidates of the window (``FSRTouchSlip._confirmed``)."""
+    among the ``_confirm_blocks`` candidates of the window (``FSRTouchSlip._confirmed``);
+    ``sign`` is the slip direction of the graph's input (+1: rising)."""
     b, gap, wb = int(detector.block), detector._peak_gap, detector._confirm_blocks
-    k, sign = int(detector.confirm_events), detector._sign
+    k = int(detector.confirm_events)
     nd = n_blocks - 1  # block derivatives in the window, oldest first
     blocks = g.op("Reshape", v, g.const([-1, n_blocks, b], np.int64), stem="blocks")
     means = g.op(
@@ -512,9 +538,10 @@ def _fsr_graph_out(
     delta: float,
     gate: bool,
     polarity: str,
+    sign: float,
 ) -> DetectorGraph:
     b = int(detector.block)
-    sign = detector._sign
+    per_recording = polarity == "per_recording" and detector.input == "voltage"
     confirm = int(detector.confirm_events) > 1
     unit = "V/s" if detector.input == "voltage" else "N/s"
     what = (
@@ -523,16 +550,21 @@ def _fsr_graph_out(
         if confirm
         else f"signed derivative of the last two {b}-sample block means"
     )
+    against = (
+        "the recording's own rest level, sign-normalised by the press_sign op"
+        if per_recording
+        else f"v_rest = {v_rest:g} V"
+    )
     model = _finish(
         g,
         inp,
         score64,
         f"FSRTouchSlip ({detector.input}) over {w} samples: {what} ({unit})"
-        + (f", NO_SCORE unless touched against v_rest = {v_rest:g} V" if gate else ""),
+        + (f", NO_SCORE unless touched against {against}" if gate else ""),
     )
     import scipy
 
-    return _graph(
+    graph = _graph(
         detector,
         model,
         opset=g.opset,
@@ -541,13 +573,27 @@ def _fsr_graph_out(
         hop=b,
         first_decision=detector._first_block * b + b - 1,
         score_meaning=(
-            f"FSRTouchSlip.decision_function at the window's last sample (a block end): "
-            f"{'rising' if sign > 0 else 'falling'} {detector.input} derivative of the block "
-            f"means ({unit}); {NO_SCORE:g} (the detector's -inf) "
+            "FSRTouchSlip.decision_function at the window's last sample (a block end): "
+            + (
+                "the derivative, against the recording's own press, of the block "
+                if per_recording
+                else f"{'rising' if sign > 0 else 'falling'} {detector.input} "
+                "derivative of the block "
+            )
+            + f"means ({unit}); {NO_SCORE:g} (the detector's -inf) "
             + ("when untouched or " if gate else "")
             + "on non-finite samples; slip ('1') where score >= threshold"
         ),
-        input_meaning=f"the last {w} FSR voltage samples (V) at {detector.rate_hz:g} Hz, oldest first",
+        input_meaning=(
+            f"the last {w} FSR voltage samples (V) at {detector.rate_hz:g} Hz, oldest "
+            "first"
+            + (
+                ", after press_sign: sign * (v - v_rest) with the recording's own rest "
+                "and press direction (0 before its first press)"
+                if per_recording
+                else ""
+            )
+        ),
         features={
             "input": detector.input,
             "polarity": polarity,
@@ -557,12 +603,35 @@ def _fsr_graph_out(
             "block": b,
             "rate_hz": float(detector.rate_hz),
             "gate": bool(gate),
-            "rest_V": v_rest,
+            "rest_V": None if per_recording else v_rest,
             "rest_signal": rest_sig,
             "delta": delta,
         },
         scipy=scipy.__version__,
     )
+    if not per_recording:
+        return graph
+    return replace(graph, preprocessing=(fsr_press_sign_step(detector),))
+
+
+def fsr_press_sign_step(detector: FSRTouchSlip) -> dict[str, Any]:
+    """The runtime step that learns a recording's wiring from its stream (``press_sign``).
+
+    For a fitted :class:`FSRTouchSlip` with ``polarity_ == "per_recording"``: the rest
+    level is the mean of the recording's first ``rest_samples`` finite samples, and
+    the first block mean (of ``block`` samples, from the first block after the rest
+    period) further than ``delta`` (V) from it sets the sign, as the batch detector
+    does (``FSRTouchSlip._block_stats``). The graph's calls are every ``block``
+    samples.
+    """
+    check_is_fitted(detector, "threshold_")
+    return {
+        "op": "press_sign",
+        "rest_frames": int(detector.rest_samples),
+        "block": int(detector.block),
+        "hop": int(detector.block),
+        "delta": float(getattr(detector, "delta_", detector._delta)),
+    }
 
 
 # -- BioTac force derivative --------------------------------------------------------------
@@ -909,6 +978,31 @@ def detector_windows(
     return np.ascontiguousarray(view[inst - (graph.window - 1)]), inst
 
 
+def _preprocessed_windows(
+    graph: DetectorGraph, x: NDArray[np.float64], inst: NDArray[np.int64]
+) -> NDArray[np.float32]:
+    """The graph inputs at ``inst`` after the graph's runtime ``preprocessing``.
+
+    As :class:`slipkit.runtime.StreamLoop` makes them for one recording: the
+    runtime's own :class:`~slipkit.runtime.preprocessing.Pipeline`, fresh, on the
+    float64 window of every call from the first (``window - 1``, then every ``hop``),
+    in order, so stateful steps see what they would see live; then float32.
+    """
+    from slipkit.runtime.preprocessing import Pipeline
+
+    w, c = graph.window, x.shape[1]
+    pipe = Pipeline(list(graph.preprocessing), (w, c), "graph preprocessing")
+    calls = np.arange(w - 1, len(x), graph.hop)
+    want = {int(i): k for k, i in enumerate(inst)}
+    out = np.empty((len(inst), w, c), dtype=np.float32)
+    for end in calls:
+        y = pipe(x[end - w + 1 : end + 1])
+        k = want.get(int(end))
+        if k is not None:
+            out[k] = np.reshape(y, (w, c))
+    return out
+
+
 def graph_scores(out: ArrayLike) -> NDArray[np.float64]:
     """A detector graph's score output as float64 with :data:`NO_SCORE` read as ``-inf``
     (the batch detector's value)."""
@@ -925,6 +1019,15 @@ def _fsr_gate_margin(
     """|press - delta| of the batch detector at ``inst`` and |graph rest - recording rest|."""
     spec = graph.features or {}
     b = int(spec["block"])
+    if spec.get("polarity") == "per_recording" and detector.input == "voltage":
+        # the press_sign op gives the graph this recording's own rest and sign: the
+        # batch detector's press per block, at the instants (block ends)
+        _, press_b = detector._block_stats(x[:, 0])
+        blk = (inst - (b - 1)) // b
+        press_i = np.full(len(inst), np.nan)
+        ok = blk < len(press_b)
+        press_i[ok] = press_b[blk[ok]]
+        return np.abs(press_i - float(spec["delta"])), 0.0
     sig = detector._signal(x[:, 0])
     head = sig[: int(detector.rest_samples)]
     finite = head[np.isfinite(head)]
@@ -1002,6 +1105,8 @@ def check_detector_parity(
         windows, inst = detector_windows(graph, Xv[a:z])
         if len(inst) == 0:
             continue
+        if graph.preprocessing:
+            windows = _preprocessed_windows(graph, Xv[a:z], inst)
         out = sess.run([graph.score_output], {graph.input_name: windows})[0]
         ours.append(graph_scores(out))
         refs.append(ref_all[a + inst])
@@ -1192,6 +1297,7 @@ __all__ = [
     "export_fsr_touch_slip",
     "export_pressure_vibration",
     "export_torsional_slip",
+    "fsr_press_sign_step",
     "graph_scores",
     "pressure_baseline",
     "steady_state_fir",

@@ -1,0 +1,180 @@
+"""FSR detectors with a per-recording polarity deploy (issue 14): the runtime op
+``press_sign`` latches each stream's rest level and wiring sign at its first press, as the
+batch detector does per recording, and the graph reads the sign-normalised signal."""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hydra import compose, initialize_config_dir
+from omegaconf import DictConfig
+from tests.baselines.test_conventions import ROBUST, fsr_trials, stack
+
+from slipkit import config_dir
+from slipkit.baselines.fsr import FSRTouchSlip, PolarityWarning
+from slipkit.export.detectors import (
+    check_detector_parity,
+    export_fsr_touch_slip,
+    fsr_press_sign_step,
+)
+from slipkit.export.registry import ExportError
+from slipkit.runtime.errors import BundleError
+from slipkit.runtime.preprocessing import Pipeline
+
+FORMS = {"paper": {}, "robust": ROBUST}
+
+
+def _mixed_detector(form: str, threshold: float | None) -> FSRTouchSlip:
+    """Fitted on generated slides of both wirings: polarity auto becomes per_recording."""
+    trials = fsr_trials(100, 3, polarity="falling", slide=True) + fsr_trials(
+        101, 3, polarity="rising", slide=True
+    )
+    X, y, seg = stack(trials)
+    det = FSRTouchSlip(threshold=threshold, **FORMS[form])  # type: ignore[arg-type]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", PolarityWarning)
+        return det.fit(X, y, segments=seg)
+
+
+def _press_sign(window: int = 10, **params: object) -> Pipeline:
+    step = {"op": "press_sign", "rest_frames": 10, "block": 5, "hop": 5, "delta": 0.2}
+    return Pipeline([{**step, **params}], (window, 1), "manifest.json")
+
+
+@pytest.mark.parametrize(("wiring", "sign"), [("falling", 1.0), ("rising", -1.0)])
+def test_press_sign_latches_the_rest_and_the_sign_at_the_first_press(
+    wiring: str, sign: float
+) -> None:
+    """Zeros until the first block mean 0.2 V from rest, then sign * (v - rest)."""
+    v = np.full(40, 2.0)
+    v[:10] = [2.0, 2.1] * 5  # rest mean 2.05 V
+    press = -1.0 if wiring == "falling" else 1.0
+    v[25:] = 2.05 + press * 0.5  # block 5 (samples 25-29) is the first one pressed
+    pipe = _press_sign()
+    outs = [pipe(v[end - 9 : end + 1][:, None])[:, 0].copy() for end in range(9, 40, 5)]
+    assert [0.0] * 10 == outs[3].tolist()  # window ending at block 4: not pressed
+    np.testing.assert_allclose(sign * (v[20:30] - 2.05), outs[4], atol=1e-12)
+    np.testing.assert_allclose(sign * (v[30:40] - 2.05), outs[6], atol=1e-12)
+
+
+def test_press_sign_never_latches_on_the_rest_blocks() -> None:
+    """A transient inside the rest period (blocks 0-1) sets no sign; a later press does."""
+    v = np.full(30, 3.0)
+    v[:5], v[5:10] = 2.0, 4.0  # rest mean 3 V, both rest blocks 1 V from it
+    v[20:] = 3.5  # block 4 rises 0.5 V: the rising wiring
+    pipe = _press_sign()
+    outs = [pipe(v[end - 9 : end + 1][:, None])[:, 0].copy() for end in range(9, 30, 5)]
+    assert [0.0] * 10 == outs[2].tolist()
+    np.testing.assert_allclose(-(v[15:25] - 3.0), outs[3], atol=1e-12)
+
+
+def test_press_sign_reset_forgets_the_stream() -> None:
+    """After reset the next window is a new stream's start (its own rest level)."""
+    pipe = _press_sign()
+    v = np.r_[np.full(10, 1.0), np.full(10, 0.5)]
+    for end in (9, 14, 19):
+        pipe(v[end - 9 : end + 1][:, None])
+    pipe.ops[0].reset()  # type: ignore[attr-defined]
+    assert [0.0] * 10 == pipe(np.full((10, 1), 0.5)).ravel().tolist()
+
+
+@pytest.mark.parametrize(
+    ("params", "field"),
+    [({"hop": 3}, "hop"), ({"block": 4, "hop": 4}, "block"), ({"delta": 0}, "delta")],
+)
+def test_press_sign_refuses_parameters_naming_the_field(
+    params: dict[str, object], field: str
+) -> None:
+    """A hop off the block grid, a block not dividing the window, delta <= 0: named."""
+    with pytest.raises(BundleError, match=rf"preprocessing\[0\]\.{field}"):
+        _press_sign(**params)
+
+
+@pytest.mark.parametrize("form", sorted(FORMS))
+@pytest.mark.parametrize("threshold", [8.0, None], ids=["alpha8", "roc"])
+def test_per_recording_graph_through_press_sign_equals_the_detector_on_both_wirings(
+    form: str, threshold: float | None
+) -> None:
+    """Paper and confirmed graphs after press_sign decide as the batch detector on
+    generated slides and knocks of either wiring (each recording its own stream)."""
+    det = _mixed_detector(form, threshold)
+    graph = export_fsr_touch_slip(det)
+    assert (fsr_press_sign_step(det),) == graph.preprocessing
+    for wiring in ("falling", "rising"):
+        held = fsr_trials(200, 2, polarity=wiring, slide=True) + fsr_trials(
+            500, 2, polarity=wiring, slide=False
+        )
+        X, _, seg = stack(held)
+        rep = check_detector_parity(det, graph, X, segments=seg)
+        assert (True, 0) == (rep["passed"], rep["n_finite_mismatch"])
+        assert rep["agreement"] >= 0.999
+        scores = det.decision_function(X, segments=seg)
+        assert bool(np.any(scores >= det.threshold_))  # the slides fire: not vacuous
+
+
+def test_per_recording_export_refuses_a_fixed_rest() -> None:
+    """rest=... has no meaning when the stream sets the rest level: ExportError."""
+    det = _mixed_detector("paper", 8.0)
+    with pytest.raises(ExportError, match="press_sign"):
+        export_fsr_touch_slip(det, rest=4.0)
+
+
+def _compose(name: str, overrides: list[str]) -> DictConfig:
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        return compose(config_name=name, overrides=overrides)
+
+
+@pytest.mark.filterwarnings("ignore::slipkit.baselines.fsr.PolarityWarning")
+def test_fsr_robust_bundle_on_the_hard_scene_decides_as_the_detector_per_stream(
+    tmp_path: Path,
+) -> None:
+    """Trained on the hard scene's mixed wirings, exported, replayed per held-out trial
+    through StreamLoop (reset between streams): decisions equal the batch detector's."""
+    from slipkit.export.commands import export_main
+    from slipkit.export.deploy import trial_frames
+    from slipkit.runtime import StreamLoop, load_bundle
+    from slipkit.train.commands import train_main
+    from slipkit.train.data import training_dataset
+    from slipkit.train.runs import read_run
+
+    run_dir, out = tmp_path / "run", tmp_path / "bundle"
+    train_main(
+        _compose(
+            "train",
+            [
+                "experiment=fsr_robust",
+                "scene=fsr_probe_slide_hard",
+                "dataset.n_trials=6",
+                f"run_dir={run_dir}",
+            ],
+        )
+    )
+    run = read_run(run_dir)
+    assert "per_recording" == run.model.polarity_
+    export_main(
+        _compose("export", [f"run={run_dir}", f"out={out}", "choose_session=false"])
+    )
+    raw = json.loads((out / "manifest.json").read_text())
+    assert ["press_sign"] == [s["op"] for s in raw["preprocessing"]]
+    loop = StreamLoop(load_bundle(out))
+    thr = float(loop.bundle.manifest.decision.threshold or 0.0)
+    test_ids = json.loads((run_dir / "metrics.json").read_text())["split"]["test"]
+    data = training_dataset(run.config)
+    wirings = set(
+        data.trials.set_index("trial_id").loc[test_ids, "fsr_polarity.polarity"]
+    )
+    assert {"falling", "rising"} == wirings
+    n_slip = 0
+    for tr in trial_frames(data, test_ids, "fsr", ["voltage"]):
+        loop.reset()
+        for values in tr.frames:
+            loop.step(values)
+        res = loop.result()
+        ref = run.model.decision_function(tr.frames)[res.frame]
+        assert (ref >= thr).tolist() == res.slip.tolist()
+        n_slip += int(res.slip.sum())
+    assert n_slip > 0
