@@ -33,6 +33,7 @@ decisions = st.builds(
     slip=st.booleans(),
     declared=st.booleans(),
     latency_ns=st.integers(0, 2**64 - 1),
+    stream=st.integers(0, 255),
 )
 
 

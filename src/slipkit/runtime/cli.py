@@ -8,9 +8,16 @@ Usage::
     slipkit-run exports/tactip_svm --udp 127.0.0.1:9000 --wait 0 --timeout 5
     slipkit-run exports/tactip_svm --choose-session      # measure session options
     slipkit-run exports/tactip_svm --udp 0.0.0.0:9000 --send 192.168.1.20:9100 --jsonl
+    slipkit-run exports/tactip_svm --lsl TacTip --lsl-out SlipDecisions
+    slipkit-run --stream index=bundles/biotac@udp:0.0.0.0:9001 \
+                --stream palm=bundles/fsr@udp:0.0.0.0:9002 --send 127.0.0.1:9100
+
+With ``--stream`` (repeated) one process serves a whole hand: each bundle on its own
+input, reported per stream (:mod:`slipkit.runtime.hand`).
 
 Exit status: 0 success; 1 ``--check`` failed (p99 over the manifest's budget, or no
-decision was made), or ``--udp`` and no frame arrived within ``--wait``; 2 a bad bundle, replay file or argument: one line on stderr,
+decision was made; with ``--stream``, on any stream), ``--udp`` / ``--lsl`` and no
+frame arrived within ``--wait``, or a stream of a hand failed; 2 a bad bundle, replay file or argument: one line on stderr,
 ``slipkit-run: error: ...``, naming the file and field or the option. Every deliberate
 error is a :class:`~slipkit.errors.SlipkitError`; any other exception is a bug and
 keeps its traceback. argparse, not Hydra: a gripper PC has numpy and onnxruntime only.
@@ -34,6 +41,7 @@ from slipkit.runtime.bundle import (
     load_bundle,
 )
 from slipkit.runtime.errors import FrameError, OptionError
+from slipkit.runtime.hand import MODES, run_hand_cli
 from slipkit.runtime.loop import StreamLoop
 from slipkit.runtime.modules import heavy_modules_loaded
 from slipkit.runtime.sinks import Fanout, JsonlSink, UdpSink, parse_address
@@ -64,7 +72,31 @@ def _parser() -> argparse.ArgumentParser:
         "per-frame latency (frame arrival -> decision) against the bundle's budget.",
     )
     p.add_argument(
-        "bundle", type=Path, help="bundle folder (model.onnx + manifest.json)"
+        "bundle",
+        type=Path,
+        nargs="?",
+        help="bundle folder (model.onnx + manifest.json); omit with --stream",
+    )
+    p.add_argument(
+        "--stream",
+        action="append",
+        metavar="NAME=BUNDLE[@SOURCE]",
+        help="a whole hand: repeat to run several bundles in one process, each on its "
+        "own input; SOURCE is replay:FILE, udp:HOST:PORT or lsl:STREAM_NAME (default: "
+        "the bundle's replay.npz); reported per stream (docs/deploy.md)",
+    )
+    p.add_argument(
+        "--hand-mode",
+        choices=MODES,
+        default="loop",
+        help="--stream: serve the streams round-robin from one thread (loop, default) "
+        "or one thread per stream (threads)",
+    )
+    p.add_argument(
+        "--pace",
+        action="store_true",
+        help="--stream: hand replay frames over at their own timestamps' rate (wall "
+        "clock), as the sensor would, instead of as fast as the loop takes them",
     )
     src = p.add_mutually_exclusive_group()
     src.add_argument(
@@ -76,6 +108,12 @@ def _parser() -> argparse.ArgumentParser:
         "--udp",
         metavar="HOST:PORT",
         help="receive frames as UDP datagrams (docs/deploy.md); port 0 picks a free port, printed on stderr",
+    )
+    src.add_argument(
+        "--lsl",
+        metavar="STREAM_NAME",
+        help="receive frames from the Lab Streaming Layer stream of this name "
+        "(needs pip install 'slipkit[lsl]')",
     )
     p.add_argument(
         "--frames",
@@ -121,6 +159,12 @@ def _parser() -> argparse.ArgumentParser:
         metavar="HOST:PORT",
         help="send every decision as it is made as a UDP datagram (docs/deploy.md, "
         "Decisions out; non-blocking: a failed send is counted, never waited on)",
+    )
+    p.add_argument(
+        "--lsl-out",
+        metavar="NAME",
+        help="push every decision as it is made to an LSL outlet of this name "
+        "(8 channels, docs/deploy.md; needs pip install 'slipkit[lsl]')",
     )
     p.add_argument(
         "--jsonl",
@@ -240,6 +284,27 @@ def _address(text: str, option: str = "--udp") -> tuple[str, int]:
 
 def _check_args(args: argparse.Namespace) -> None:
     """Range checks argparse's types do not make; each error names its option."""
+    if args.stream:
+        if args.bundle is not None:
+            raise OptionError(
+                "--stream",
+                f"give either a BUNDLE or --stream, not both (got BUNDLE {str(args.bundle)!r})",
+            )
+        for option, given in (
+            ("--replay", args.replay),
+            ("--udp", args.udp),
+            ("--lsl", args.lsl),
+            ("--choose-session", args.choose_session or None),
+        ):
+            if given is not None:
+                raise OptionError(
+                    option,
+                    "is for a single BUNDLE; with --stream give NAME=BUNDLE@SOURCE",
+                )
+    elif args.bundle is None:
+        raise OptionError("BUNDLE", "give a bundle folder, or one --stream per bundle")
+    elif args.pace:
+        raise OptionError("--pace", "applies to --stream runs only")
     if args.frames is not None and args.frames < 1:
         raise OptionError("--frames", f"must be >= 1; got {args.frames}")
     if not 0 < args.timeout <= MAX_TIMEOUT_S:  # False for NaN too
@@ -324,6 +389,27 @@ def _run_source(
                 "wait" if src.waited_out else "timeout" if src.timed_out else "frames"
             ),
         }
+    elif args.lsl is not None:
+        from slipkit.runtime.lsl import LslSource
+
+        with LslSource(
+            args.lsl,
+            bundle.manifest.frame.shape,
+            max_frames=args.frames,
+            timeout_s=args.timeout,
+            wait_s=args.wait,
+        ) as lsrc:
+            print(f"resolving {lsrc.where}", file=sys.stderr, flush=True)
+            result = loop.run(lsrc)
+        name = lsrc.where
+        udp = {
+            "kind": "lsl",
+            "received": lsrc.n_received,
+            "last_error": lsrc.last_error,
+            "ended": (
+                "wait" if lsrc.waited_out else "timeout" if lsrc.timed_out else "frames"
+            ),
+        }
     else:
         frames, times, name = _replay(bundle, args.replay)
         if args.frames is not None:
@@ -343,8 +429,11 @@ def run(argv: Sequence[str] | None = None) -> int:
     """Parse arguments, run, print; return the exit status (see the module docstring)."""
     args = _parser().parse_args(argv)
     _check_args(args)
-    bundle = load_bundle(args.bundle, deadline_s=args.load_deadline)
     out: dict[str, Any]
+    if args.stream:
+        out, status = run_hand_cli(args)
+        return _finish(args, out, status)
+    bundle = load_bundle(args.bundle, deadline_s=args.load_deadline)
     if args.choose_session:
         frames, times, name = _replay(bundle, args.replay)
         n = len(frames) if args.frames is None else args.frames
@@ -389,6 +478,12 @@ def run(argv: Sequence[str] | None = None) -> int:
             sinks.append(udp_sink)
         if args.jsonl:
             sinks.append(JsonlSink())
+        lsl_hook = None
+        if args.lsl_out is not None:
+            from slipkit.runtime.lsl import LslOutlet
+
+            lsl_hook = LslOutlet(args.lsl_out, [bundle.manifest.name]).hook(0)
+            sinks.append(lsl_hook)
         hook = None if not sinks else sinks[0] if len(sinks) == 1 else Fanout(*sinks)
         try:
             loop = StreamLoop(bundle, io_binding=args.io_binding, on_decision=hook)
@@ -411,6 +506,19 @@ def run(argv: Sequence[str] | None = None) -> int:
             print(line)
         if udp is None and replay_line is not None:
             print(replay_line)
+        if lsl_hook is not None:
+            out["lsl_out"] = {"name": args.lsl_out, "pushed": lsl_hook.n_pushed}
+            print(
+                f"lsl-out: {lsl_hook.n_pushed} decisions pushed to LSL stream {args.lsl_out!r}"
+            )
+        lsl = udp if udp is not None and udp.pop("kind", None) == "lsl" else None
+        if lsl is not None:
+            out["lsl"] = lsl
+            udp = None
+            print(
+                f"lsl: {lsl['received']} received"
+                + (f" (last error: {lsl['last_error']})" if lsl["last_error"] else "")
+            )
         if udp is not None:
             out["udp"] = udp
             print(
@@ -433,8 +541,16 @@ def run(argv: Sequence[str] | None = None) -> int:
             # The sensor never came: a failed run whether or not --check was given.
             print(f"udp: no frame arrived within --wait {args.wait:g} s")
             status = 1
+        if lsl is not None and lsl["ended"] == "wait":
+            print(f"lsl: no frame arrived within --wait {args.wait:g} s")
+            status = 1
         if args.check:
             print(f"check: {'passed' if status == 0 else 'FAILED'}")
+    return _finish(args, out, status)
+
+
+def _finish(args: argparse.Namespace, out: dict[str, Any], status: int) -> int:
+    """--report-modules and --json, then the exit status."""
     if args.report_modules:
         heavy = heavy_modules_loaded()
         out["heavy_modules_loaded"] = heavy

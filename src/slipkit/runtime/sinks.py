@@ -13,14 +13,15 @@ are such callables:
 yields :class:`Decision` records until no datagram came for ``timeout_s``).
 
 Datagram layout (version 1), little-endian, 40 bytes, ``struct`` format
-``<4sB3xQdfhBBQ`` (:data:`DECISION_FORMAT`), each field at its natural alignment:
+``<4sBB2xQdfhBBQ`` (:data:`DECISION_FORMAT`), each field at its natural alignment:
 
 ======  =====  ==========  =========================================================
 offset  bytes  type        field
 ======  =====  ==========  =========================================================
 0       4      char[4]     magic ``b"SKDC"``
 4       1      u8          version, 1
-5       3      (padding)   zero
+5       1      u8          stream index (0 for a single bundle; a hand's ``--stream`` order)
+6       2      (padding)   zero
 8       8      u64         frame index (0-based, counted by the loop since its start)
 16      8      f64         frame timestamp, s (sensor time; NaN when not given)
 24      4      f32         score (the value the decision rule read)
@@ -49,7 +50,11 @@ from slipkit.runtime.errors import FrameError, OptionError
 
 DECISION_MAGIC = b"SKDC"
 DECISION_VERSION = 1
-DECISION_FORMAT = "<4sB3xQdfhBBQ"
+# Byte 5 (the stream index) was padding before multi-stream runs: a receiver that
+# ignores it reads single-bundle datagrams unchanged.
+DECISION_FORMAT = "<4sBB2xQdfhBBQ"
+#: Most streams one process can tag (the stream index is one byte).
+MAX_STREAMS = 256
 _STRUCT = struct.Struct(DECISION_FORMAT)
 DECISION_SIZE = _STRUCT.size  # 40 bytes
 #: Largest receive wait, s.
@@ -75,6 +80,8 @@ class Decision(NamedTuple):
         Debounced (declared) slip state after this decision.
     latency_ns : int
         Frame arrival -> decision, ns.
+    stream : int
+        Stream index (0 for a single bundle; in a hand, the ``--stream`` order).
     """
 
     frame: int
@@ -84,6 +91,7 @@ class Decision(NamedTuple):
     slip: bool
     declared: bool
     latency_ns: int
+    stream: int = 0
 
 
 def pack_decision(d: Decision) -> bytes:
@@ -91,6 +99,7 @@ def pack_decision(d: Decision) -> bytes:
     return _STRUCT.pack(
         DECISION_MAGIC,
         DECISION_VERSION,
+        d.stream,
         d.frame,
         d.timestamp,
         d.score,
@@ -107,7 +116,9 @@ def unpack_decision(data: bytes, where: str = "datagram") -> Decision:
         raise FrameError(
             where, f"size {len(data)} bytes; a decision datagram is {DECISION_SIZE}"
         )
-    magic, version, frame, ts, score, klass, slip, decl, lat = _STRUCT.unpack(data)
+    magic, version, stream, frame, ts, score, klass, slip, decl, lat = _STRUCT.unpack(
+        data
+    )
     if magic != DECISION_MAGIC:
         raise FrameError(where, f"magic {magic!r}; expected {DECISION_MAGIC!r}")
     if version != DECISION_VERSION:
@@ -116,7 +127,7 @@ def unpack_decision(data: bytes, where: str = "datagram") -> Decision:
         raise FrameError(
             where, f"slip / declared bytes {slip} / {decl}; expected 0 or 1"
         )
-    return Decision(frame, ts, score, klass, bool(slip), bool(decl), lat)
+    return Decision(frame, ts, score, klass, bool(slip), bool(decl), lat, stream)
 
 
 def parse_address(text: str, option: str) -> tuple[str, int]:
@@ -143,6 +154,9 @@ class UdpSink:
     ----------
     host, port : str, int
         Where the grip controller listens (port 1-65535).
+    stream : int
+        Stream index written into every datagram (byte 5), in [0, 255]; a hand
+        gives each stream its own sink with its index.
 
     Attributes
     ----------
@@ -155,9 +169,14 @@ class UdpSink:
         The latest send error.
     """
 
-    def __init__(self, host: str, port: int) -> None:
+    def __init__(self, host: str, port: int, *, stream: int = 0) -> None:
         if not 0 < port <= 65535:
             raise OptionError("port", f"must be in [1, 65535]; got {port}")
+        if not 0 <= stream < MAX_STREAMS:
+            raise OptionError(
+                "stream", f"must be in [0, {MAX_STREAMS - 1}]; got {stream}"
+            )
+        self.stream = int(stream)
         try:
             infos = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)
         except (OSError, UnicodeError, ValueError) as exc:  # ValueError: a NUL
@@ -198,6 +217,7 @@ class UdpSink:
                 0,
                 DECISION_MAGIC,
                 DECISION_VERSION,
+                self.stream,
                 frame,
                 timestamp,
                 score,
@@ -230,16 +250,29 @@ class JsonlSink:
     """Write each decision as one JSON object per line, flushed per line.
 
     Keys: ``frame``, ``t`` (s, null when not given), ``score``, ``class`` (index,
-    null for an unclassed threshold rule), ``slip``, ``declared``, ``latency_ns``.
+    null for an unclassed threshold rule), ``slip``, ``declared``, ``latency_ns``;
+    with a ``label``, first ``stream`` (the label).
 
     Parameters
     ----------
     stream : text file, optional
         Where to write (default: ``sys.stdout`` at call time).
+    label : str, optional
+        The stream's name, written as the ``stream`` key (a hand's streams share stdout).
+    lock : lock, optional
+        Held while a line is written, so the threads of a hand cannot interleave lines.
     """
 
-    def __init__(self, stream: TextIO | None = None) -> None:
+    def __init__(
+        self,
+        stream: TextIO | None = None,
+        *,
+        label: str | None = None,
+        lock: Any | None = None,
+    ) -> None:
         self._stream = stream
+        self._head = {} if label is None else {"stream": label}
+        self._lock = lock
 
     def __call__(
         self,
@@ -253,9 +286,10 @@ class JsonlSink:
     ) -> None:
         """Write one decision line (the :class:`StreamLoop` ``on_decision`` hook)."""
         out = self._stream or sys.stdout
-        out.write(
+        line = (
             json.dumps(
                 {
+                    **self._head,
                     "frame": frame,
                     "t": None if math.isnan(timestamp) else timestamp,
                     "score": score if math.isfinite(score) else None,
@@ -267,7 +301,13 @@ class JsonlSink:
             )
             + "\n"
         )
-        out.flush()
+        if self._lock is None:
+            out.write(line)
+            out.flush()
+            return
+        with self._lock:
+            out.write(line)
+            out.flush()
 
 
 class Fanout:

@@ -414,6 +414,9 @@ class UdpSource(_Socket):
         last accepted frame.
     waited_out : bool
         The stream ended because no frame was accepted within ``wait_s``.
+    ended : bool
+        :meth:`poll` has nothing more to give (``max_frames`` reached or a deadline
+        passed).
     last_error : str or None
         Why the last datagram was rejected.
 
@@ -495,6 +498,7 @@ class UdpSource(_Socket):
         self.n_received = self.n_rejected = self.n_lost = self.n_resyncs = 0
         self.timed_out = self.waited_out = False
         self.last_error: str | None = None
+        self._start()
 
     def _expire(self) -> None:
         if self.n_received:
@@ -506,16 +510,60 @@ class UdpSource(_Socket):
         self.n_rejected += 1
         self.last_error = problem
 
-    def __iter__(self) -> Iterator[Frame]:
-        recv_into, clock, buf = self.sock.recv_into, time.perf_counter_ns, self._buf
-        settimeout, now = self.sock.settimeout, time.monotonic
-        last = -1
-        out_of_order = 0  # consecutive well-formed datagrams with an index <= last
+    def _start(self) -> None:
+        """Reset the index sequence and start the wait clock (a new iteration or poll)."""
+        self._last = -1
+        self._out_of_order = (
+            0  # consecutive well-formed datagrams with an index <= last
+        )
         # Before the first accepted frame the deadline is ``wait_s`` from the start
         # (None: forever), after it ``timeout_s`` from the last accepted frame; both on
         # the wall clock, so a stream of junk datagrams cannot keep the run alive.
-        deadline = None if self.wait_s == 0 else now() + self.wait_s
+        self._deadline: float | None = (
+            None if self.wait_s == 0 else time.monotonic() + self.wait_s
+        )
+        self.ended = False
+
+    def _admit(self, n: int, arrival: int) -> Frame | None:
+        """Check the ``n``-byte datagram in the buffer: the frame, or None when rejected."""
+        if n != self.expected:
+            self._reject(
+                f"datagram of {n} bytes; a frame of {self.n_values} values is {self.expected}"
+            )
+            return None
+        magic, version, _flags, index, ts, nv = HEADER.unpack_from(self._buf)
+        if magic != MAGIC or version != VERSION or nv != self.n_values:
+            self._reject(
+                f"header magic={magic!r} version={version} n_values={nv}; expected {MAGIC!r}, {VERSION}, {self.n_values}"
+            )
+            return None
+        last = self._last
+        if index <= last:
+            if self._out_of_order < self.resync_after:
+                self._out_of_order += 1
+                self._reject(
+                    f"frame index {index} is not above the last one ({last}): "
+                    "late or repeated"
+                )
+                return None
+            self.n_resyncs += 1  # a sender that restarted its count
+        elif last >= 0:
+            if index - last - 1 > MAX_LOST_JUMP:
+                self.n_resyncs += 1  # a jump, not that many lost frames
+            else:
+                self.n_lost += index - last - 1
+        self._out_of_order = 0
+        self._last = index
+        self.n_received += 1
+        self._deadline = time.monotonic() + self.timeout_s
+        return Frame(index, ts, self._values, arrival)
+
+    def __iter__(self) -> Iterator[Frame]:
+        recv_into, clock, buf = self.sock.recv_into, time.perf_counter_ns, self._buf
+        settimeout, now, admit = self.sock.settimeout, time.monotonic, self._admit
+        self._start()
         while self.max_frames is None or self.n_received < self.max_frames:
+            deadline = self._deadline
             if deadline is not None:
                 left = deadline - now()
                 if left <= 0:
@@ -529,37 +577,43 @@ class UdpSource(_Socket):
             except TimeoutError:
                 self._expire()
                 return
-            arrival = clock()
-            if n != self.expected:
-                self._reject(
-                    f"datagram of {n} bytes; a frame of {self.n_values} values is {self.expected}"
-                )
-                continue
-            magic, version, _flags, index, ts, nv = HEADER.unpack_from(buf)
-            if magic != MAGIC or version != VERSION or nv != self.n_values:
-                self._reject(
-                    f"header magic={magic!r} version={version} n_values={nv}; expected {MAGIC!r}, {VERSION}, {self.n_values}"
-                )
-                continue
-            if index <= last:
-                if out_of_order < self.resync_after:
-                    out_of_order += 1
-                    self._reject(
-                        f"frame index {index} is not above the last one ({last}): "
-                        "late or repeated"
-                    )
-                    continue
-                self.n_resyncs += 1  # a sender that restarted its count
-            elif last >= 0:
-                if index - last - 1 > MAX_LOST_JUMP:
-                    self.n_resyncs += 1  # a jump, not that many lost frames
-                else:
-                    self.n_lost += index - last - 1
-            out_of_order = 0
-            last = index
-            self.n_received += 1
-            deadline = now() + self.timeout_s
-            yield Frame(index, ts, self._values, arrival)
+            frame = admit(n, clock())
+            if frame is not None:
+                yield frame
+
+    def start_polling(self) -> None:
+        """Make the socket non-blocking and start the wait clock, for :meth:`poll`."""
+        self.sock.setblocking(False)
+        self._start()
+
+    def poll(self, max_reads: int = 64) -> Frame | None:
+        """The next accepted frame if one is queued, else None; never blocks.
+
+        For a loop that serves several sources in one thread (:mod:`slipkit.runtime.hand`):
+        call :meth:`start_polling` once, then ``poll`` whenever the socket is readable
+        or a deadline may have passed. At most ``max_reads`` datagrams are read per
+        call, so a flood of junk on this socket cannot hold the loop from another
+        source. Sets :attr:`ended` (and :attr:`timed_out` or :attr:`waited_out`) when
+        ``max_frames`` were accepted or a deadline passed.
+        """
+        if self.ended:
+            return None
+        if self.max_frames is not None and self.n_received >= self.max_frames:
+            self.ended = True
+            return None
+        recv_into, buf = self.sock.recv_into, self._buf
+        for _ in range(max_reads):
+            try:
+                n = recv_into(buf)
+            except (BlockingIOError, InterruptedError):
+                break
+            frame = self._admit(n, time.perf_counter_ns())
+            if frame is not None:
+                return frame
+        if self._deadline is not None and time.monotonic() > self._deadline:
+            self._expire()
+            self.ended = True
+        return None
 
 
 class UdpSender(_Socket):
