@@ -96,8 +96,39 @@ def markdown_table(df: pd.DataFrame, spec: Sequence[tuple[str, str, str]]) -> st
         "|" + "|".join("---" for _ in cols) + "|",
     ]
     for _, r in df.iterrows():
-        lines.append("| " + " | ".join(fmt(r[c], f) for c, _, f in cols) + " |")
+        lines.append("| " + " | ".join(cell(r, c, f) for c, _, f in cols) + " |")
     return "\n".join(lines)
+
+
+#: columns fixed by the config or the data layout: a spread over seeds says nothing there
+NO_SPREAD = frozenset(
+    {
+        "budget_p99_us",
+        "frame_period_us",
+        "fit_calls",
+        "window_frames",
+        "window_ms",
+        "decision_frames",
+        "disturbances",
+        "n_slips",
+    }
+)
+
+
+def cell(row: pd.Series, column: str, spec: str) -> str:
+    """``row[column]`` formatted, as ``mean ± std`` when the row has a finite ``<column>_std``
+    (a comparison over several seeds)."""
+    text = fmt(row[column], spec)
+    std = row.get(f"{column}_std")
+    if (
+        text
+        and spec != "{}"
+        and column not in NO_SPREAD
+        and isinstance(std, float)
+        and math.isfinite(std)
+    ):
+        text += f" ± {fmt(std, spec)}"
+    return text
 
 
 def margin_text(p99_us: float, budget_us: float, margin: float) -> str:
@@ -135,7 +166,7 @@ def deploy_lines(df: pd.DataFrame, primary: str) -> list[str]:
     )
     what = (
         f"`{best['estimator']}` ({best['kind']}, {best['class']}): {primary} "
-        f"{fmt(best[primary], '{:.4g}')}{cost}{delay}."
+        f"{cell(best, primary, '{:.4g}')}{_over_seeds(best)}{cost}{delay}."
     )
     out = (
         [f"**Deploy {what}**"]
@@ -150,7 +181,27 @@ def deploy_lines(df: pd.DataFrame, primary: str) -> list[str]:
     if passed:
         out += ["", "Passed over (higher or equal score):", ""]
         out += [f"- `{e}`: {w}" for e, w in passed]
+    out += ["", TIMING_RULE]
     return out
+
+
+def _over_seeds(row: pd.Series) -> str:
+    n = row.get("n_seeds")
+    return (
+        f" (mean ± std over {int(n)} seeds)"
+        if isinstance(n, int | float) and math.isfinite(n) and n > 1
+        else ""
+    )
+
+
+#: how the verdict treats timing noise, stated under every verdict
+TIMING_RULE = (
+    "Budget rule: the p99 checked is the median of the p99s of 5 contiguous blocks of the "
+    "timed decisions (all seeds' decisions pooled), so one stall of a shared machine does "
+    "not decide; a row is within budget when that p99 <= the budget, and a margin between "
+    f"{BORDERLINE:.2f} and {1 / BORDERLINE:.2f} x the budget is flagged borderline (a "
+    "re-measure on another machine may land on the other side)."
+)
 
 
 def verdict(df: pd.DataFrame, primary: str) -> list[str]:
@@ -215,7 +266,11 @@ def write_report(
     seconds: float,
 ) -> Path:
     """Write ``folder/report.md`` and return its path."""
-    reg_cols = [c for c in df.columns if c.startswith(("rmse_", "smse_"))]
+    reg_cols = [
+        c
+        for c in df.columns
+        if c.startswith(("rmse_", "smse_")) and not c.endswith(("_std", "_ci"))
+    ]
     lines = [
         f"# Comparison: {name}",
         "",
@@ -308,6 +363,8 @@ def write_report(
 
 __all__ = [
     "CONTROLS",
+    "TIMING_RULE",
+    "cell",
     "deploy_lines",
     "margin_text",
     "markdown_table",

@@ -73,7 +73,7 @@ def metric_unit(primary: str, columns: Sequence[str] = ()) -> str:
         found = {
             AXIS_UNITS.get(c[len("rmse_") :], "")
             for c in columns
-            if c.startswith("rmse_")
+            if c.startswith("rmse_") and not c.endswith(("_std", "_ci"))
         }
         return found.pop() if len(found) == 1 else ""
     return ""
