@@ -39,7 +39,12 @@ from slipkit.compare import plots
 from slipkit.compare.adapters import Evaluation, RunView, adapt
 from slipkit.compare.costs import DeployCost, FitTimer, deploy_cost, quiet_console
 from slipkit.compare.report import write_report
-from slipkit.compare.table import block_p99, build_table, seed_table
+from slipkit.compare.table import (
+    block_p99,
+    build_table,
+    seed_table,
+    verdict_limits,
+)
 from slipkit.errors import SlipkitError
 from slipkit.train.runs import new_run_dir
 
@@ -494,6 +499,8 @@ def run_comparison(
             _seed_comparison(comp, seeds[0], several=several, data=data), cfg
         )
     primary = str(comp.get("primary", "accuracy"))
+    # checked before anything trains: a typo in a limit must not cost a comparison
+    limits = verdict_limits(comp.get("verdict"), "comparison.verdict")
     analytic = [str(a) for a in comp.get("analytic") or []]
     cost_cfg = _container(cfg.get("cost") or OmegaConf.create({}))
     keep = bool(cost_cfg.get("keep_bundles", False))
@@ -600,6 +607,7 @@ def run_comparison(
         split_note=split_note,
         summaries=summaries,
         seconds=time.perf_counter() - start,
+        verdict_limits=limits,
     )
     return Comparison(folder, report, df, evals, costs, list(seeds), runs_of, seeds_df)
 

@@ -12,6 +12,7 @@ import pandas as pd
 from slipkit.compare.table import (
     BORDERLINE,
     choose_deploy,
+    disturbance_rate,
     is_borderline,
     metric_unit,
     per_unit,
@@ -142,14 +143,20 @@ def margin_text(p99_us: float, budget_us: float, margin: float) -> str:
     return text
 
 
-def deploy_lines(df: pd.DataFrame, primary: str) -> list[str]:
+def deploy_lines(
+    df: pd.DataFrame, primary: str, *, max_alarms_per_disturbance: float | None = None
+) -> list[str]:
     """The deploy decision of :func:`~slipkit.compare.table.choose_deploy` as Markdown lines.
+
+    ``max_alarms_per_disturbance`` (a comparison's ``verdict:``) is passed on to the
+    rule and printed beside the chosen row's own rate.
 
     The recommended estimator with its p99 / budget margin, or "no estimator meets the
     budget" and the best-scoring one with its p99; then each higher-scoring estimator
     passed over with its reason.
     """
-    choice = choose_deploy(df)
+    limit = max_alarms_per_disturbance
+    choice = choose_deploy(df, max_alarms_per_disturbance=limit)
     best = choice.row
     if best is None:
         return ["No estimator produced a score."]
@@ -163,7 +170,7 @@ def deploy_lines(df: pd.DataFrame, primary: str) -> list[str]:
         f", median detection delay {best['delay_ms']:.1f} ms"
         if math.isfinite(float(best["delay_ms"]))
         else ""
-    )
+    ) + _disturbance_note(best, limit)
     what = (
         f"`{best['estimator']}` ({best['kind']}, {best['class']}): {primary} "
         f"{cell(best, primary, '{:.4g}')}{_over_seeds(best)}{cost}{delay}."
@@ -172,7 +179,9 @@ def deploy_lines(df: pd.DataFrame, primary: str) -> list[str]:
         [f"**Deploy {what}**"]
         if choice.recommended
         else [
-            "**No estimator meets the budget.** The best-scoring "
+            "**No estimator meets the budget"
+            + ("" if limit is None else " and the disturbance limit")
+            + ".** The best-scoring "
             + ("exported " if best["export"] == "ok" else "")
             + f"one, not recommended: {what}"
         ]
@@ -204,9 +213,28 @@ TIMING_RULE = (
 )
 
 
-def verdict(df: pd.DataFrame, primary: str) -> list[str]:
+def _disturbance_note(row: pd.Series, limit: float | None) -> str:
+    """``, fires on 0 % of 13 disturbances (limit 10 %)`` (empty without a count)."""
+    rate = disturbance_rate(row)
+    if not math.isfinite(rate):
+        return ""
+    try:
+        n = float(row.get("disturbances"))  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        n = math.nan
+    of = f"of {n:.0f} disturbances" if math.isfinite(n) else "of the disturbances"
+    return f", fires on {rate * 100:.0f} % {of}" + (
+        "" if limit is None else f" (limit {limit * 100:g} %)"
+    )
+
+
+def verdict(
+    df: pd.DataFrame, primary: str, *, max_alarms_per_disturbance: float | None = None
+) -> list[str]:
     """Which estimator to deploy (:func:`deploy_lines`), and what each step along the Pareto front costs."""
-    out = deploy_lines(df, primary)
+    out = deploy_lines(
+        df, primary, max_alarms_per_disturbance=max_alarms_per_disturbance
+    )
     if out == ["No estimator produced a score."]:
         return out
     front = df[df["pareto"].astype(bool)].sort_values("p99_us")
@@ -264,8 +292,10 @@ def write_report(
     split_note: str,
     summaries: Mapping[str, str],
     seconds: float,
+    verdict_limits: Mapping[str, float] | None = None,
 ) -> Path:
-    """Write ``folder/report.md`` and return its path."""
+    """Write ``folder/report.md`` and return its path (``verdict_limits``: the checked
+    ``verdict:`` of the comparison, :func:`slipkit.compare.table.verdict_limits`)."""
     reg_cols = [
         c
         for c in df.columns
@@ -286,7 +316,7 @@ def write_report(
         "",
         "## Verdict",
         "",
-        *verdict(df, primary),
+        *verdict(df, primary, **dict(verdict_limits or {})),
         "",
         "## Accuracy",
         "",

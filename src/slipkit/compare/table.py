@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike
 
 from slipkit.compare.adapters import ROW_COLUMNS
+from slipkit.errors import SlipkitError
 
 #: columns of ``metrics.csv`` before the per-axis regression columns
 COLUMNS = (
@@ -182,8 +184,82 @@ class DeployChoice:
         return is_borderline(self.margin)
 
 
-def _rejection(r: pd.Series) -> str | None:
-    """Why ``r`` cannot be recommended (None when it can): not exported, or p99 over budget."""
+def _rejection(
+    r: pd.Series, max_alarms_per_disturbance: float | None = None
+) -> str | None:
+    """Why ``r`` cannot be recommended (None when it can): not exported, p99 over budget,
+    or firing on more than ``max_alarms_per_disturbance`` of the test disturbances."""
+    return _deploy_rejection(r) or _disturbance_rejection(r, max_alarms_per_disturbance)
+
+
+def _disturbance_rejection(r: pd.Series, limit: float | None) -> str | None:
+    """``fires on 54 % of disturbances > 10 %`` when ``alarms_per_disturbance`` is above
+    ``limit`` (a fraction); None without a limit or where no disturbance was counted."""
+    rate = disturbance_rate(r)
+    if limit is None or not math.isfinite(rate) or rate <= limit:
+        return None
+    return f"fires on {rate * 100:.0f} % of disturbances > {limit * 100:g} %"
+
+
+def disturbance_rate(r: pd.Series | dict[str, object]) -> float:
+    """The row's ``alarms_per_disturbance`` (fraction of test disturbances it fired on;
+    NaN when the data marks none)."""
+    value = r.get("alarms_per_disturbance", math.nan)
+    try:
+        return math.nan if value is None else float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return math.nan
+
+
+#: the keys a comparison's ``verdict:`` mapping may hold (limits on top of the budget)
+VERDICT_KEYS = ("max_alarms_per_disturbance",)
+
+
+def verdict_limits(
+    node: Mapping[str, Any] | None, where: str = "comparison.verdict"
+) -> dict[str, float]:
+    """A comparison's ``verdict:`` mapping checked, as keyword arguments of
+    :func:`choose_deploy`.
+
+    ``max_alarms_per_disturbance``: a fraction in [0, 1] (``0.10``: a row that fires on
+    more than 10 % of the test disturbances is passed over); null or absent: no limit.
+
+    Raises
+    ------
+    SlipkitError
+        Not a mapping, an unknown key, or a limit that is not a number in [0, 1];
+        the message names ``where`` and the key.
+    """
+    if node is None:
+        return {}
+    if not isinstance(node, Mapping):
+        raise SlipkitError(
+            f"{where}: must be a mapping such as {{max_alarms_per_disturbance: 0.10}}; "
+            f"got {node!r}"
+        )
+    out: dict[str, float] = {}
+    for key, value in node.items():
+        if key not in VERDICT_KEYS:
+            raise SlipkitError(
+                f"{where}.{key}: unknown verdict limit; known: {list(VERDICT_KEYS)}"
+            )
+        if value is None:
+            continue
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, int | float)
+            or not 0.0 <= float(value) <= 1.0
+        ):
+            raise SlipkitError(
+                f"{where}.{key}: must be a fraction in [0, 1] (0.10 = 10 % of the "
+                f"disturbances) or null; got {value!r}"
+            )
+        out[str(key)] = float(value)
+    return out
+
+
+def _deploy_rejection(r: pd.Series) -> str | None:
+    """Not exported, or p99 over budget (None: deployable within budget)."""
     note = r.get("export")
     if note != "ok":
         text = (
@@ -206,18 +282,27 @@ def _rejection(r: pd.Series) -> str | None:
     return None
 
 
-def choose_deploy(df: pd.DataFrame) -> DeployChoice:
+def choose_deploy(
+    df: pd.DataFrame, *, max_alarms_per_disturbance: float | None = None
+) -> DeployChoice:
     """The deploy rule: the highest score among exported rows whose p99 meets the budget.
 
     Rows are ranked by ``score`` (higher first), ties by p99 (lower first), then table
-    order. An over-budget or unexported row is never recommended; each one ranked above
-    the choice is listed with its reason. When no row qualifies, the best-scoring exported
-    row (else the best-scoring row) is returned with ``recommended`` False.
+    order. An over-budget or unexported row is never recommended, nor, with
+    ``max_alarms_per_disturbance``, one that fires on a larger fraction of the test
+    disturbances; each one ranked above the choice is listed with its reason. When no
+    row qualifies, the best-scoring exported row (else the best-scoring row) is
+    returned with ``recommended`` False.
 
     Parameters
     ----------
     df : pandas.DataFrame
-        A :func:`build_table` table (``score``, ``export``, ``p99_us``, ``budget_p99_us``).
+        A :func:`build_table` table (``score``, ``export``, ``p99_us``, ``budget_p99_us``,
+        ``alarms_per_disturbance`` where the data marks disturbances).
+    max_alarms_per_disturbance : float or None
+        Largest fraction (0..1) of disturbances a recommended row may fire on (a
+        comparison's ``verdict:``, :func:`verdict_limits`); None: no limit. A row
+        without a disturbance count is not held to it.
 
     Returns
     -------
@@ -233,7 +318,7 @@ def choose_deploy(df: pd.DataFrame) -> DeployChoice:
     )
     passed: list[tuple[str, str]] = []
     for _, r in ranked.iterrows():
-        why = _rejection(r)
+        why = _rejection(r, max_alarms_per_disturbance)
         if why is None:
             return DeployChoice(r, True, tuple(passed), _margin(r))
         passed.append((str(r["estimator"]), why))
@@ -364,9 +449,11 @@ def seed_table(
     return build_table(rows, primary)
 
 
-def best_row(df: pd.DataFrame) -> pd.Series | None:
+def best_row(
+    df: pd.DataFrame, *, max_alarms_per_disturbance: float | None = None
+) -> pd.Series | None:
     """The row :func:`choose_deploy` returns (recommended or, when none meets the budget, shown)."""
-    return choose_deploy(df).row
+    return choose_deploy(df, max_alarms_per_disturbance=max_alarms_per_disturbance).row
 
 
 __all__ = [
@@ -376,15 +463,18 @@ __all__ = [
     "LOWER_IS_BETTER",
     "METRIC_UNITS",
     "P99_BLOCKS",
+    "VERDICT_KEYS",
     "DeployChoice",
     "best_row",
     "block_p99",
     "build_table",
     "choose_deploy",
+    "disturbance_rate",
     "is_borderline",
     "metric_unit",
     "pareto_front",
     "per_unit",
     "score_of",
     "seed_table",
+    "verdict_limits",
 ]

@@ -20,7 +20,8 @@ only the positive one).
 
 ``frames`` returns the rule's frame table (``segment, frame, t_start_s, t_end_s,
 pos_area_px, neg_area_px, incident, slip``), so the DAVIS task scores both the same way.
-No ONNX exporter (the DAVIS task has no deployer).
+Exported by :mod:`slipkit.export.events`: the features from the runtime's event frames
+(counts per pixel) as ONNX ops, the scaler and logistic regression through skl2onnx.
 """
 
 from __future__ import annotations
@@ -51,6 +52,32 @@ FEATURES = (
     "pos_event_share",
     "pos_area_share",
 )
+
+
+def event_features(
+    counts: NDArray[np.float64], areas: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """:data:`FEATURES` of frames from their event counts and areas.
+
+    Parameters
+    ----------
+    counts, areas : ndarray of shape (n_frames, 2)
+        Positive and negative events per frame, and the distinct pixels (px) each
+        polarity fired. The exported graph (:mod:`slipkit.export.events`) computes
+        the same numbers from the runtime's event frames.
+
+    Returns
+    -------
+    ndarray of shape (n_frames, len(FEATURES))
+    """
+    return np.column_stack(
+        [
+            np.log1p(counts),
+            np.log1p(areas),
+            (counts[:, 0] + 1) / (counts.sum(axis=1) + 2),
+            (areas[:, 0] + 1) / (areas.sum(axis=1) + 2),
+        ]
+    )
 
 
 class EventFrameClassifier(ClassifierMixin, BaseEstimator):
@@ -139,14 +166,7 @@ class EventFrameClassifier(ClassifierMixin, BaseEstimator):
                 )
                 uniq = np.unique(pix) // (w * int(self.height_px))
                 areas[:, j] = np.bincount(uniq, minlength=n)
-            f = np.column_stack(
-                [
-                    np.log1p(counts),
-                    np.log1p(areas),
-                    (counts[:, 0] + 1) / (counts.sum(axis=1) + 2),
-                    (areas[:, 0] + 1) / (areas.sum(axis=1) + 2),
-                ]
-            )
+            f = event_features(counts, areas)
             idx = np.arange(n)
             rows.append(
                 pd.DataFrame(
@@ -241,4 +261,4 @@ class EventFrameClassifier(ClassifierMixin, BaseEstimator):
         return frames.assign(incident=np.where(slip, SLIP, NONE).astype(int), slip=slip)
 
 
-__all__ = ["FEATURES", "EventFrameClassifier"]
+__all__ = ["FEATURES", "EventFrameClassifier", "event_features"]
