@@ -60,15 +60,20 @@ Per task
     Frame = one raw sample of ``task.stream`` (``task.channels``); window and hop are
     what the detector's graph needs (:class:`slipkit.export.detectors.DetectorGraph`,
     e.g. FSR: 10 samples every 5), no preprocessing (the detector's math is in the
-    graph). Slip class ``1`` (the detector's positive class); parity is the
-    detectors' own check on the held-out recordings.
+    graph), except for an FSR detector whose polarity is ``per_recording``: one step,
+    ``press_sign``, latches the stream's rest level and wiring sign at its first
+    press. Slip class ``1`` (the detector's positive class); parity is the
+    detectors' own check on the held-out recordings (through that step).
 ``DavisRelease``
     Frame = one 10 ms event frame ``[2, H, W]`` (positive and negative counts per
     pixel), window 1, hop 1. One preprocessing step, ``davis_areas`` (the detector's
     opening, closing and connected-component area filter in numpy: ONNX has no op
     for connected components), then a two-row graph for the polarity rule
-    (``export/davis.py``). Only the analytic ``DavisPolarity`` deploys; parity: the
-    op's areas equal the detector's on every held-out frame.
+    (``export/davis.py``); parity: the op's areas equal the detector's on every
+    held-out frame. The learned ``EventFrameClassifier``: one ``frame_s`` (20 ms)
+    event frame, no preprocessing, the counts, areas, scaler and logistic regression
+    in the graph (``export/events.py``); parity: the frames' features equal the
+    classifier's on every held-out frame, then the graph's logit the classifier's.
 """
 
 from __future__ import annotations
@@ -849,10 +854,31 @@ def _deploy_detection(
             f"fixed pressure baseline {base:.4g} counts RMS (median of the training "
             "recordings; the batch detector measures one per recording)"
         )
+    steps: list[dict[str, Any]] = []
+    from slipkit.baselines.fsr import FSRTouchSlip
+
+    if (
+        isinstance(run.model, FSRTouchSlip)
+        and run.model.input == "voltage"
+        and getattr(run.model, "polarity_", None) == "per_recording"
+    ):
+        # Training wirings of both signs: the runtime learns each stream's rest level
+        # and press direction at its first press (the press_sign op), as the batch
+        # detector does per recording; the graph reads the sign-normalised signal.
+        from slipkit.export.detectors import fsr_press_sign_step
+
+        steps = [fsr_press_sign_step(run.model)]
+        notes.append(
+            "press_sign: the stream's rest level (mean of its first "
+            f"{run.model.rest_samples} samples) and wiring sign (its first block mean "
+            f"further than {steps[0]['delta']:g} V from rest) latched on the gripper "
+            "PC, as the detector's per-recording polarity; start the loop (or reset "
+            "it) at rest before each grasp"
+        )
     return Deployment(
         # window and hop come from the graph (DetectorGraph.window / .hop)
         frame=_frame([stream], channels, 1, 1, rate),
-        preprocessing=[],
+        preprocessing=steps,
         export_options=export_options,
         positive=positive,
         debounce_k=int(options.get("debounce_k") or 1),
@@ -1022,13 +1048,17 @@ def _deploy_davis(
     from slipkit.export.davis import DavisAreaRule
     from slipkit.train.tasks.davis import DavisRelease
 
+    from slipkit.models.events import EventFrameClassifier
+
     assert isinstance(task, DavisRelease)
     det = run.model
+    if isinstance(det, EventFrameClassifier):  # the learned one: features in the graph
+        return _deploy_davis_events(task, run, dataset, options)
     if type(det) is not DavisPolarity:
         raise SlipkitError(
-            f"run {run.path}: only the DavisPolarity rule deploys on DAVIS (its area "
-            f"filter is the runtime's davis_areas op); the run's model is "
-            f"{type(det).__name__}"
+            f"run {run.path}: only the DavisPolarity rule (its area filter is the "
+            f"runtime's davis_areas op) and the EventFrameClassifier deploy on DAVIS; "
+            f"the run's model is {type(det).__name__}"
         )
     frame_s, h, w = float(det.frame_s), int(det.height_px), int(det.width_px)
     split = run_metrics(run).get("split", {})
@@ -1111,6 +1141,101 @@ def _deploy_davis(
             "(numpy; ONNX has no connected components), checked equal to the "
             "detector's areas on every held-out frame",
             "decision: slip when positive area > 0 and >= negative area (the graph)",
+        ],
+    )
+
+
+def _deploy_davis_events(
+    task: Task, run: Run, dataset: Dataset, options: Mapping[str, Any]
+) -> Deployment:
+    """``DavisRelease`` with the learned ``EventFrameClassifier``: the whole model in the graph.
+
+    Frame = one ``frame_s`` (20 ms) event frame as counts per pixel, ``(2, height_px,
+    width_px)``, window 1, hop 1, at ``1 / frame_s`` Hz, no preprocessing: the graph
+    (:mod:`slipkit.export.events`) computes the counts and areas and runs the scaler
+    and logistic regression. The model checked and exported is
+    :class:`slipkit.export.events.EventFrameScores` (the classifier scoring event
+    frames); before anything is written, its features of every held-out frame are
+    checked equal to the classifier's own (``frame_features`` on the events). Slip
+    class ``"1"`` (logit >= 0); debounce 1.
+    """
+    from slipkit.export.events import EventFrameScores
+    from slipkit.train.tasks.davis import DavisRelease
+
+    assert isinstance(task, DavisRelease)
+    clf = run.model
+    scores = EventFrameScores(classifier=clf).fit()
+    frame_s, h, w = float(clf.frame_s), int(clf.height_px), int(clf.width_px)
+    split = run_metrics(run).get("split", {})
+    if split.get("test"):
+        test_ids = {str(t) for t in split["test"]}
+    else:  # the task's own split, the run's seed
+        from slipkit.data.splits import split_by_trial
+
+        seed = int(run.config.get("seed", 0))
+        test_ids = {
+            str(t)
+            for t in split_by_trial(dataset, test_size=task.test_size, seed=seed).test
+        }
+    trials = []
+    for trial in dataset.subset([t for t in dataset.trial_ids if str(t) in test_ids]):
+        table = trial.streams[task.stream].sort_values("t", kind="stable")
+        ev = table[["t", "x", "y", "polarity"]].to_numpy(np.float64)
+        frames, times = davis_event_frames(ev, frame_s=frame_s, height_px=h, width_px=w)
+        if not len(frames):
+            continue
+        # The runtime frames' features against the training-side classifier's, per frame.
+        _, want = clf.frame_features(ev)
+        got = scores.features(frames)
+        bad = np.flatnonzero(~np.isclose(want, got, rtol=1e-12, atol=0).all(axis=1))
+        if len(bad) or len(want) != len(got):
+            k = int(bad[0]) if len(bad) else min(len(want), len(got))
+            raise SlipkitError(
+                f"trial {trial.trial_id}, frame {k}: the event frame's features differ "
+                f"from EventFrameClassifier.frame_features ({len(bad)} of {len(frames)} "
+                "frames); no bundle written"
+            )
+        label = str(int(np.isfinite(float(trial.labels.get(task.label, np.inf)))))
+        group = trial.meta.get(task.group)
+        trials.append(
+            HeldOutTrial(
+                str(trial.trial_id),
+                frames,
+                times,
+                label=label,
+                group=None if group is None else str(group),
+            )
+        )
+    if not trials:
+        raise SlipkitError(
+            f"none of the held-out trials of run {run.path} has events in the rebuilt "
+            f"dataset {dataset.name!r}"
+        )
+    channels = [
+        f"{p}_{r}_{c}" for p in ("pos", "neg") for r in range(h) for c in range(w)
+    ]
+    return Deployment(
+        frame={
+            "streams": [task.stream],
+            "channels": channels,
+            "shape": [2, h, w],
+            "window": 1,
+            "hop": 1,
+            "rate_hz": 1.0 / frame_s,
+        },
+        preprocessing=[],
+        export_options={},
+        positive="1",
+        debounce_k=int(options.get("debounce_k") or 1),
+        trials=trials,
+        model=scores,
+        max_replay_frames=max(1, DAVIS_REPLAY_BYTES // (8 * 2 * h * w)),
+        notes=[
+            f"event frames of {frame_s * 1e3:g} ms ({task.stream!r}): counts per pixel, "
+            f"positive then negative, {h} x {w} px",
+            "the graph computes the event counts and areas (pixels that fired) per "
+            "polarity and runs the scaler and logistic regression (no morphology)",
+            "decision: slip when the logit >= 0 (probability >= 1/2)",
         ],
     )
 
