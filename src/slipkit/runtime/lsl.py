@@ -198,16 +198,25 @@ class LslSource:
                 f"the stream has {n} channels; the bundle's frame has {self.n_values} "
                 f"values (frame.shape {list(self.frame_shape)})",
             )
-        if int(info.channel_format()) == int(getattr(lsl, "cf_string", 3)):
+        if int(info.channel_format()) == int(lsl.cf_string):
             raise FrameError(
                 self.where, "the stream's channel format is string; frames are numbers"
             )
-        flags = int(getattr(lsl, "proc_clocksync", 1))
-        self._inlet = lsl.StreamInlet(
-            info, max_buflen=1, max_chunklen=1, processing_flags=flags
-        )
-        left = None if self._deadline is None else max(self._deadline - now(), 0.1)
-        self._inlet.open_stream(timeout=left if left is not None else 32000000.0)
+        flags = int(lsl.proc_clocksync)
+        # pylsl's default buffer (360 s of samples): a shorter one would drop the
+        # oldest frames silently when the loop falls behind; max_chunklen=1 asks the
+        # outlet to send each sample as it is pushed.
+        self._inlet = lsl.StreamInlet(info, max_chunklen=1, processing_flags=flags)
+        left = 32e6 if self._deadline is None else max(self._deadline - now(), 0.1)
+        try:
+            self._inlet.open_stream(timeout=left)
+        # pylsl raises TimeoutError, or its LostError (a RuntimeError) for a stream
+        # that went away between resolution and subscription.
+        except (TimeoutError, RuntimeError, OSError) as exc:
+            self.close()
+            raise FrameError(
+                self.where, f"could not subscribe to the stream: {exc}"
+            ) from None
 
     def close(self) -> None:
         """Close the inlet (if it was opened)."""
@@ -323,8 +332,8 @@ class LslOutlet:
             name,
             DECISION_TYPE,
             len(DECISION_CHANNELS),
-            getattr(lsl, "IRREGULAR_RATE", 0.0),
-            getattr(lsl, "cf_double64", 1),
+            lsl.IRREGULAR_RATE,
+            lsl.cf_double64,
             f"slipkit-{name}",
         )
         desc = info.desc()
