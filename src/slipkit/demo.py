@@ -163,7 +163,7 @@ def demo_main(cfg: DictConfig) -> Path:
 
     # 4. export the best of each family ------------------------------------------------------
     from slipkit.compare.costs import export_run, time_bundle
-    from slipkit.compare.table import choose_deploy
+    from slipkit.compare.table import choose_deploy, verdict_limits
 
     best: dict[str, dict[str, Any]] = {}
     exported: dict[str, Path] = {}
@@ -171,7 +171,11 @@ def demo_main(cfg: DictConfig) -> Path:
         list(results.items()), desc="4/6 export best", unit="family", disable=not show
     ):
         # the comparison report's own rule (one function): within budget, else shown only
-        choice = choose_deploy(res.table)
+        # (and the comparison's verdict limits, e.g. the FSR disturbance rate)
+        node = OmegaConf.to_container(plan[family].comparison, resolve=True)
+        assert isinstance(node, dict)
+        limits = verdict_limits(node.get("verdict"), f"comparison {family}: verdict")
+        choice = choose_deploy(res.table, **limits)
         row = choice.row
         if row is None:
             continue
