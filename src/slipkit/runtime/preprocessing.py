@@ -641,17 +641,26 @@ class _PressSign:
     def _latch(self, x: Array) -> None:
         b = self.block
         blocks = x[: self._nb * b, 0].reshape(self._nb, b)
-        acc = np.zeros(self._nb)
-        for j in range(b):  # left to right, as the detector sums a block
-            acc = acc + blocks[:, j]
-        dev = acc / b - self.rest
-        # stream block of the window's first block (calls every hop frames from 0)
-        start = (self._calls * self.hop) // b
-        dev[: max(self.first_block - start, 0)] = np.nan
-        with np.errstate(invalid="ignore"):
-            away = np.flatnonzero(np.abs(dev) > self.delta)
-        if len(away):
-            self.sign = -1.0 if dev[away[0]] > 0 else 1.0
+        if b < 8:
+            # numpy sums fewer than 8 values left to right, as the detector does (a
+            # loop over the block's columns, 3x slower, gives the same bits)
+            means = blocks.sum(axis=1)
+        else:  # longer rows are summed pairwise: add the columns in order instead
+            means = blocks[:, 0].copy()
+            for j in range(1, b):
+                means += blocks[:, j]
+        means /= b
+        np.subtract(means, self.rest, out=means)
+        # stream block of the window's first block (calls every hop frames from 0);
+        # the rest period's blocks never latch
+        skip = self.first_block - (self._calls * self.hop) // b
+        if skip > 0:
+            means[:skip] = 0.0
+        # NaN (a missing sample) compares False: its block never latches
+        away = np.abs(means) > self.delta
+        k = int(away.argmax())
+        if away[k]:
+            self.sign = -1.0 if means[k] > 0 else 1.0
 
     def __call__(self, x: Array) -> Array:
         if self._count < self.rest_n:
