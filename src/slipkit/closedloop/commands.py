@@ -24,7 +24,7 @@ import logging
 import math
 import sys
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -123,8 +123,14 @@ def train_run(spec: Mapping[str, Any], n_trials: int, seed: int, run_dir: Path) 
     return run_dir
 
 
-def export_bundle(run: Path, out: Path, debounce_k: int) -> Path:
-    """Export ``run`` with ``slipkit export``'s function, declaring slip after ``debounce_k`` frames."""
+def export_bundle(
+    run: Path, out: Path, debounce_k: int, overrides: Sequence[str] = ()
+) -> Path:
+    """Export ``run`` with ``slipkit export``'s function, declaring slip after ``debounce_k`` frames.
+
+    ``overrides``: further ``slipkit export`` options (a detector's ``export:`` list,
+    e.g. ``regression.threshold=10`` for a SlipTack speed graph).
+    """
     from slipkit.export.commands import export_main
 
     ecfg = _compose(
@@ -136,6 +142,7 @@ def export_bundle(run: Path, out: Path, debounce_k: int) -> Path:
             "choose_session=false",
             "replay_max_frames=200",
             "parity.max_calls=5000",
+            *[str(o) for o in overrides],
         ],
     )
     path, text = _quiet(export_main, ecfg)
@@ -182,7 +189,12 @@ def build_detectors(
             log.info("trained %s in %.1f s", run_name, time.perf_counter() - start)
         k = int(node.debounce_k)
         check_value(f"closedloop.detectors.{name}.debounce_k", k, COUNT)
-        bundle = export_bundle(runs[run_name], folder / "bundles" / str(name), k)
+        bundle = export_bundle(
+            runs[run_name],
+            folder / "bundles" / str(name),
+            k,
+            [str(o) for o in node.get("export") or []],
+        )
         det = BundleDetector(bundle, str(name), warmup=warmup)
         detectors.append(det)
         info[str(name)] = {
