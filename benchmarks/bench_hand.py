@@ -1,0 +1,247 @@
+"""A five-stream hand in one process against each bundle alone (issue 16).
+
+Trains five small runs in a temporary folder (``train_main``), exports each with
+``slipkit export`` (``export_main``: parity checked), and replays them (each bundle's
+``replay.npz``, repeated to fill the run) through
+:mod:`slipkit.runtime.hand` **paced at the sensors' own rates** (each frame handed over
+at its timestamp on the wall clock, as the sensor would send it), so a frame that
+comes due while another stream's model runs waits, and that wait is in its latency:
+
+* thumb: BioTac electrodes (300 Hz), the slip-type window CNN;
+* index: BioTac electrodes (300 Hz), the slip-type window MLP;
+* middle: BioTac electrodes (300 Hz), the 3x10 force MLP;
+* palm: FSR (2 kHz), the touch-and-slip detector;
+* ring: TacTip pins (120 Hz), the RBF SVM with the pin features in the graph.
+
+Each round runs every bundle alone, then all five in one process in ``loop`` mode (one
+thread, round-robin) and in ``threads`` mode (one thread per stream), each for
+``--seconds`` of sensor time, in that order; the table gives, per stream, the median
+over rounds of each run's p50 / p99 (us), the decisions over the stream's own p99
+budget (summed over rounds, out of all decisions) and the ratio hand p99 / alone p99.
+
+    .venv/bin/python benchmarks/bench_hand.py [--seconds 3] [--rounds 3] [--keep DIR]
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import contextlib  # noqa: E402
+import io  # noqa: E402
+import platform  # noqa: E402
+import tempfile  # noqa: E402
+from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+#: stream -> (train overrides, what it is)
+HAND: dict[str, tuple[list[str], str]] = {
+    "thumb": (
+        [
+            "experiment=biotac_slip_type",
+            "~task.compare",
+            "model=window_cnn",
+            "dataset.n_trials=40",
+            "task.sweep=[]",
+            "task.first_frame_control=false",
+            "task.dynamics=null",
+            "model.max_epochs=20",
+        ],
+        "BioTac electrodes 300 Hz, slip-type window CNN",
+    ),
+    "index": (
+        [
+            "experiment=biotac_slip_type",
+            "~task.compare",
+            "dataset.n_trials=40",
+            "task.sweep=[]",
+            "task.first_frame_control=false",
+            "task.dynamics=null",
+            "model.max_epochs=20",
+        ],
+        "BioTac electrodes 300 Hz, slip-type window MLP",
+    ),
+    "middle": (
+        [
+            "experiment=biotac_force",
+            "~task.compare",
+            "dataset.n_trials=6",
+            "scene.model.duration_s=20",
+            "task.block_s=10",
+        ],
+        "BioTac electrodes 300 Hz, 3x10 force MLP",
+    ),
+    "palm": (["experiment=fsr_roc"], "FSR 2 kHz, touch-and-slip detector"),
+    "ring": (
+        ["experiment=tactip_svm"],
+        "TacTip 120 Hz, RBF SVM (pin features in graph)",
+    ),
+}
+
+
+def _compose(name: str, overrides: list[str]) -> Any:
+    from hydra import compose, initialize_config_dir
+
+    from slipkit import config_dir
+
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        return compose(config_name=name, overrides=overrides)
+
+
+def make_bundles(root: Path, names: list[str]) -> dict[str, Path]:
+    """Train and export each stream's run under ``root`` (reused when already there)."""
+    from slipkit.export.commands import export_main
+    from slipkit.train.commands import train_main
+
+    out = {}
+    for name in names:
+        overrides, _ = HAND[name]
+        run_dir, bundle_dir = root / "runs" / name, root / "exports" / name
+        if not (run_dir / "run.json").is_file():
+            with contextlib.redirect_stdout(io.StringIO()):
+                train_main(
+                    _compose(
+                        "train", [*overrides, f"run_dir={run_dir}", "overwrite=true"]
+                    )
+                )
+        if not (bundle_dir / "manifest.json").is_file():
+            with contextlib.redirect_stdout(io.StringIO()):
+                export_main(
+                    _compose(
+                        "export",
+                        [f"run={run_dir}", f"out={bundle_dir}", "overwrite=true"],
+                    )
+                )
+        out[name] = bundle_dir
+    return out
+
+
+def tiled_replay(bundle: Any, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The bundle's replay repeated to ``n`` frames, each copy one frame period after the last."""
+    from slipkit.runtime import load_replay
+
+    f = bundle.manifest.frame
+    frames, times = load_replay(bundle.replay_path, f.shape, f.rate_hz)
+    period = 1.0 / f.rate_hz
+    span = float(times[-1] - times[0]) + period
+    reps = -(-n // len(frames))
+    idx = np.arange(reps * len(frames))[:n]
+    copy, row = np.divmod(idx, len(frames))
+    return frames[row], (times[row] - times[0]) + copy * span
+
+
+def run_once(
+    bundles: dict[str, Path], names: list[str], mode: str, seconds: float
+) -> dict[str, Any]:
+    """Run ``names`` together (one name: alone), paced; per stream: latency ns, budget ms."""
+    from slipkit.runtime import StreamLoop, load_bundle
+    from slipkit.runtime.hand import HandStream, ReplayFeed, StreamBinding, run_streams
+
+    streams = []
+    for i, name in enumerate(names):
+        binding = StreamBinding(name, bundles[name])
+        bundle = load_bundle(bundles[name])
+        n = max(int(seconds * bundle.manifest.frame.rate_hz), 1)
+        frames, times = tiled_replay(bundle, n)
+        source = ReplayFeed(frames, times, pace=True)
+        streams.append(HandStream(i, binding, bundle, StreamLoop(bundle), source))
+    run_streams(streams, mode, start_delay_s=0.05)
+    out = {}
+    for s in streams:
+        assert s.error is None, s.error
+        assert s.result is not None
+        out[s.name] = {
+            "lat_ns": s.result.latency_ns,
+            "budget_ms": s.bundle.manifest.budget.p99_ms,
+            "frames": s.result.n_frames,
+            "rate_hz": s.bundle.manifest.frame.rate_hz,
+            "bundle": s.bundle.manifest.name,
+        }
+    return out
+
+
+def _pct_us(lat_ns: np.ndarray) -> tuple[float, float]:
+    if len(lat_ns) == 0:
+        return float("nan"), float("nan")
+    p50, p99 = np.percentile(lat_ns / 1e3, [50, 99])
+    return float(p50), float(p99)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    ap.add_argument("--seconds", type=float, default=3.0, help="sensor time per run, s")
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument(
+        "--keep", type=Path, default=None, help="keep runs and bundles here"
+    )
+    args = ap.parse_args()
+
+    import onnxruntime as ort
+
+    root = args.keep or Path(tempfile.mkdtemp(prefix="bench_hand-"))
+    names = list(HAND)
+    bundles = make_bundles(root, names)
+    configs = ["alone", "loop", "threads"]
+    # name -> config -> list of (p50, p99, over, decisions) per round
+    acc: dict[str, dict[str, list[tuple[float, float, int, int]]]] = {
+        n: {c: [] for c in configs} for n in names
+    }
+    meta: dict[str, dict[str, Any]] = {}
+    for _ in range(args.rounds):
+        runs: dict[str, dict[str, Any]] = {"loop": {}, "threads": {}, "alone": {}}
+        for name in names:
+            runs["alone"].update(run_once(bundles, [name], "loop", args.seconds))
+        runs["loop"] = run_once(bundles, names, "loop", args.seconds)
+        runs["threads"] = run_once(bundles, names, "threads", args.seconds)
+        for c in configs:
+            for name, r in runs[c].items():
+                lat = r["lat_ns"]
+                p50, p99 = _pct_us(lat)
+                over = int(np.sum(lat / 1e6 > r["budget_ms"]))
+                acc[name][c].append((p50, p99, over, len(lat)))
+                meta[name] = r
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    print(
+        f"onnxruntime {ort.__version__}, numpy {np.__version__}, {os.cpu_count()} CPUs "
+        f"({platform.machine()}), load average {load:.1f}; {args.rounds} rounds x "
+        f"{args.seconds:g} s of sensor time per run, paced; us; median over rounds"
+    )
+    print()
+    print(
+        "| stream | bundle | rate Hz | budget p99 | alone p50 / p99 | hand (loop) p50 / p99 "
+        "| loop / alone p99 | hand (threads) p50 / p99 | threads / alone p99 "
+        "| over budget alone / loop / threads | hand met (loop / threads) |"
+    )
+    print("|" + "---|" * 11)
+    for name in names:
+        m = meta[name]
+        budget_us = m["budget_ms"] * 1e3
+        med = {
+            c: (
+                float(np.median([r[0] for r in acc[name][c]])),
+                float(np.median([r[1] for r in acc[name][c]])),
+                sum(r[2] for r in acc[name][c]),
+                sum(r[3] for r in acc[name][c]),
+            )
+            for c in configs
+        }
+        a, lo, th = med["alone"], med["loop"], med["threads"]
+        print(
+            f"| {name} ({HAND[name][1]}) | {m['bundle']} | {m['rate_hz']:g} | "
+            f"{budget_us:.0f} | {a[0]:.1f} / {a[1]:.1f} | {lo[0]:.1f} / {lo[1]:.1f} | "
+            f"{lo[1] / a[1]:.2f}x | {th[0]:.1f} / {th[1]:.1f} | {th[1] / a[1]:.2f}x | "
+            f"{a[2]} / {lo[2]} / {th[2]} of {a[3]} / {lo[3]} / {th[3]} | "
+            f"{'yes' if lo[1] <= budget_us else 'no'} / "
+            f"{'yes' if th[1] <= budget_us else 'no'} |"
+        )
+    print()
+    print(f"bundles: {root / 'exports'}")
+
+
+if __name__ == "__main__":
+    main()
