@@ -32,7 +32,7 @@ import pandas as pd
 from omegaconf import DictConfig, OmegaConf
 
 from slipkit._files import atomic_dir, check_out_path
-from slipkit._options import COUNT, SEED, check_options, check_value
+from slipkit._options import COUNT, FLAG, SEED, check_options, check_value
 from slipkit.closedloop.detectors import (
     BundleDetector,
     Detector,
@@ -72,10 +72,43 @@ def load_scenario(cfg: DictConfig) -> DictConfig:
     if not isinstance(plain, dict):
         raise SlipkitError(f"configs/closedloop/{name}.yaml: expected a mapping")
     scen = OmegaConf.create(plain)
+    demo = cfg.get("demo", False)
+    check_value("demo", demo, FLAG)
+    if demo:
+        apply_demo(scen, name)
     for key in ("trials_per_speed", "train_trials"):
         if cfg.get(key) is not None:
             scen[key] = int(cfg[key])
     return scen
+
+
+def apply_demo(scen: DictConfig, name: str) -> None:
+    """Shrink ``scen`` to its ``demo:`` block (in place): trials, training trials, detectors, delays.
+
+    ``demo.detectors`` lists the detectors kept (each must be one of ``detectors``);
+    the runs no kept detector uses are not trained.
+    """
+    block = scen.get("demo")
+    if block is None:
+        raise SlipkitError(
+            f"demo=true: configs/closedloop/{name}.yaml has no demo: block"
+        )
+    for key in ("trials_per_speed", "train_trials"):
+        if block.get(key) is not None:
+            check_value(f"configs/closedloop/{name}.yaml demo.{key}", block[key], COUNT)
+            scen[key] = int(block[key])
+    if block.get("oracle_delays_ms") is not None:
+        scen["oracle_delays_ms"] = list(block.oracle_delays_ms)
+    keep = block.get("detectors")
+    if keep is not None:
+        known = scen.get("detectors") or {}
+        missing = [str(d) for d in keep if str(d) not in known]
+        if missing:
+            raise SlipkitError(
+                f"configs/closedloop/{name}.yaml demo.detectors: {missing} not among "
+                f"detectors ({', '.join(map(str, known))})"
+            )
+        scen["detectors"] = {str(d): known[str(d)] for d in keep}
 
 
 def scenario_of(scen: DictConfig) -> ClosedLoopScenario:
@@ -151,9 +184,26 @@ def export_bundle(
 
 
 def _run_metrics(run: Path) -> dict[str, float]:
-    """The run's held-out frame accuracy and balanced accuracy (%)."""
+    """The run's held-out per-frame accuracy and balanced accuracy (%).
+
+    A frame classifier's ``test.accuracy`` / ``test.balanced_accuracy``; a stream
+    detector's from its per-sample counts (``test.samples``: tp, fn, fp, tn).
+    """
     metrics = json.loads((run / "metrics.json").read_text())
     test = metrics.get("test", {})
+    if "accuracy" not in test and isinstance(test.get("samples"), dict):
+        c = test["samples"]
+        try:
+            tp, fn, fp, tn = (float(c[k]) for k in ("tp", "fn", "fp", "tn"))
+        except (KeyError, TypeError, ValueError):
+            tp = fn = fp = tn = math.nan
+        n = tp + fn + fp + tn
+        tpr = tp / (tp + fn) if tp + fn > 0 else math.nan
+        tnr = tn / (tn + fp) if tn + fp > 0 else math.nan
+        return {
+            "accuracy_pct": 100.0 * (tp + tn) / n if n > 0 else math.nan,
+            "balanced_accuracy_pct": 50.0 * (tpr + tnr),
+        }
     return {
         "accuracy_pct": 100.0 * float(test.get("accuracy", math.nan)),
         "balanced_accuracy_pct": 100.0 * float(test.get("balanced_accuracy", math.nan)),
@@ -231,7 +281,10 @@ def run_scenario(
         raise SlipkitError("closedloop.plant: expected a mapping of plant parameters")
     plant = {str(k): v for k, v in plain.items()}
     scenario = scenario_of(scen)
-    scene_cfg = _compose("train", [f"scene={scen.scene}"]).scene
+    scene_cfg = _compose(
+        "train",
+        [f"scene={scen.scene}", *[str(o) for o in scen.get("scene_overrides") or []]],
+    ).scene
     scene = build_scene(scene_cfg)
     scenario.check(scen, scene)
     conditions = scenario.conditions(scen)

@@ -31,6 +31,10 @@ class Detector(ABC):
 
     name: str = "detector"
     kind: str = "bound"
+    #: The sensor channels the detector reads, in order (None: it reads no frame).
+    channels: tuple[str, ...] | None = None
+    #: Its frame rate, Hz (None: every plant frame).
+    rate_hz: float | None = None
 
     def reset(self) -> None:  # noqa: B027 - a bound detector keeps no state
         """Start a new trial (nothing to forget by default)."""
@@ -45,11 +49,12 @@ class Detector(ABC):
 
 
 class OracleDetector(Detector):
-    """Declares slip on the first frame at least ``delay_s`` after the plant's slip onset.
+    """Declares slip on every frame at least ``delay_s`` into a slide of the plant.
 
-    With ``delay_s = 0`` (the bound) that is the first frame on which the object is
+    With ``delay_s = 0`` (the bound) that is every frame on which the object is
     sliding; a positive ``delay_s`` traces the plant's slip distance against a known
-    detection delay.
+    detection delay. (A one-shot controller consults it only up to the first
+    declaration; a continuous one, on every slide.)
     """
 
     def __init__(self, name: str = "oracle", *, delay_s: float = 0.0) -> None:
@@ -59,11 +64,10 @@ class OracleDetector(Detector):
             raise ValueError(f"delay_s must be a finite number >= 0 s; got {delay_s!r}")
 
     def decide(self, state: PlantState, frame: Callable[[], np.ndarray]) -> bool:
-        """True once the plant has slid for ``delay_s``."""
+        """True while the plant slides and its slide has lasted ``delay_s``."""
         del frame
-        onset = state.onset_s
         # 1e-9 s: a delay of a whole number of frames lands on that frame.
-        return not math.isnan(onset) and state.t - onset >= self.delay_s - 1e-9
+        return state.sliding and state.t - state.slide_start_s >= self.delay_s - 1e-9
 
 
 class NoDetector(Detector):
@@ -96,6 +100,11 @@ class BundleDetector(Detector):
         The bundle's debounce (consecutive slip decisions).
     p99_budget_us, frame_period_us : float
         The sensor's budget from the manifest, us.
+    channels : tuple of str
+        The frame's channels, in order (``stream.channel`` when the frame spans
+        several streams, else the channel).
+    rate_hz : float
+        The frame rate, Hz.
     """
 
     kind = "bundle"
@@ -116,6 +125,8 @@ class BundleDetector(Detector):
         self.debounce_k = int(m.debounce_k)
         self.p99_budget_us = float(m.budget.p99_ms) * 1e3
         self.frame_period_us = float(m.budget.frame_period_ms) * 1e3
+        self.channels = tuple(str(c) for c in m.frame.channels)
+        self.rate_hz = float(m.frame.rate_hz)
         self.loop = StreamLoop(self.bundle)
         self._lat: list[np.ndarray] = []
 

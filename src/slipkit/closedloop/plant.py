@@ -27,6 +27,7 @@ integration against the closed forms (:func:`slip_distance_driven`).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from slipkit.errors import SlipkitError
@@ -129,9 +130,14 @@ class PlantState:
     onset_s : float
         First slip onset, s (NaN until it slips).
     arrest_s : float
-        When the slip stopped (re-stick after an onset), s (NaN until then).
+        When the slip stopped (re-stick after an onset), s (NaN until then);
+        :class:`PinchPlant` moves it to the latest re-stick.
     dropped : bool
         The object slid past the plant's travel: it is lost.
+    slide_start_s : float
+        Start of the current (or latest) slide, s (NaN until it slips).
+    load_N : float
+        Tangential load on the contact now, N (NaN where the plant does not track it).
     """
 
     t: float
@@ -144,6 +150,8 @@ class PlantState:
     onset_s: float = math.nan
     arrest_s: float = math.nan
     dropped: bool = False
+    slide_start_s: float = math.nan
+    load_N: float = math.nan
 
 
 class GraspPlant:
@@ -246,6 +254,7 @@ class GraspPlant:
         if not self.holds(s.normal_N):
             s.sliding = True
             s.onset_s = s.t
+            s.slide_start_s = s.t
 
     def _substep(self, h: float) -> None:
         s = self.state
@@ -259,6 +268,7 @@ class GraspPlant:
         s.normal_N = self.force(s.indentation_mm)
         if not s.sliding and not self.holds(s.normal_N):
             s.sliding = True
+            s.slide_start_s = t_next
             if math.isnan(s.onset_s):
                 s.onset_s = t_next
         if s.sliding:
@@ -286,6 +296,127 @@ class GraspPlant:
         s.speed_mm_s = 0.0
         if not math.isnan(s.onset_s) and math.isnan(s.arrest_s):
             s.arrest_s = t
+
+    def step(self) -> PlantState:
+        """Advance one frame (``1 / rate_hz`` s, in ``substeps`` steps); the new state."""
+        h = 1.0 / self.rate_hz / self.substeps
+        for _ in range(self.substeps):
+            if self.state.dropped:
+                self.state.t += h
+                continue
+            self._substep(h)
+        return self.state
+
+
+class PinchPlant:
+    """An object pinched by a force-controlled hand under a tangential load that changes in time.
+
+    A prosthetic or robot hand holds the object between ``contacts`` fingertips with grip
+    force ``F_n`` (N, the normal force on each contact, what an FSR or a BioTac reads);
+    the controller commands ``F_n`` through an :class:`Actuator` (latency and first-order
+    lag, the command in N), clipped to ``[0, max_force_N]``. The tangential load ``Q(t)``
+    (N: the weight once lifted, plus a load increase) is given as a function of time.
+    Coulomb friction over the contacts (Johnson 1985, Sec. 7.1): stuck while
+    ``Q <= contacts mu_s F_n``; sliding ``m dv/dt = Q - contacts mu_k F_n``; re-stuck
+    when the speed returns to zero with ``Q <= contacts mu_s F_n``. It can slip again
+    later (the load keeps rising): ``onset_s`` stays the first onset, ``arrest_s``
+    moves to the latest re-stick, ``slide_start_s`` marks each slide's start.
+
+    Parameters
+    ----------
+    mass_kg : float
+        Object mass, kg.
+    mu_s, mu_k : float
+        Static and kinetic friction coefficients (``0 <= mu_k <= mu_s``).
+    contacts : int
+        Fingertips sharing the load (2: a pinch).
+    load : callable
+        ``Q(t)``, N, for ``t`` in s.
+    actuator : Actuator
+        Delivers the commanded grip force, N.
+    max_force_N : float
+        Grip force limit of the hand, N.
+    travel_mm : float
+        Slide past which the object leaves the grasp (dropped), mm.
+    rate_hz : float
+        Frame rate the plant is stepped at, Hz.
+    substeps : int
+        Integration steps per frame.
+    """
+
+    def __init__(
+        self,
+        *,
+        mass_kg: float,
+        mu_s: float,
+        mu_k: float,
+        contacts: int,
+        load: Callable[[float], float],
+        actuator: Actuator,
+        max_force_N: float,
+        travel_mm: float,
+        rate_hz: float,
+        substeps: int = 1,
+    ) -> None:
+        self.mass_kg = _check("mass_kg", mass_kg, strict=True)
+        self.mu_s = _check("mu_s", mu_s, strict=True)
+        self.mu_k = _check("mu_k", mu_k)
+        if self.mu_k > self.mu_s:
+            raise SlipkitError(
+                f"mu_k: need 0 <= mu_k <= mu_s ({self.mu_s}); got {mu_k!r}"
+            )
+        if int(contacts) != contacts or contacts < 1:
+            raise SlipkitError(
+                f"contacts: must be a whole number >= 1; got {contacts!r}"
+            )
+        self.contacts = int(contacts)
+        self.load = load
+        self.actuator = actuator
+        self.max_force_N = _check("max_force_N", max_force_N, strict=True)
+        self.travel_mm = _check("travel_mm", travel_mm, strict=True)
+        self.rate_hz = _check("rate_hz", rate_hz, strict=True)
+        if int(substeps) != substeps or substeps < 1:
+            raise SlipkitError(
+                f"substeps: must be a whole number >= 1; got {substeps!r}"
+            )
+        self.substeps = int(substeps)
+        force = min(max(actuator.output, 0.0), self.max_force_N)
+        self.state = PlantState(
+            t=0.0,
+            indentation_mm=math.nan,
+            arm_mm_s=math.nan,
+            normal_N=force,
+            load_N=float(load(0.0)),
+        )
+
+    def holds(self, normal_N: float, load_N: float) -> bool:
+        """Whether static friction over the contacts carries ``load_N`` at this grip."""
+        return load_N <= self.contacts * self.mu_s * normal_N
+
+    def _substep(self, h: float) -> None:
+        s = self.state
+        t_next = s.t + h
+        s.normal_N = min(max(self.actuator.advance(s.t, h), 0.0), self.max_force_N)
+        s.load_N = q = float(self.load(t_next))
+        if not s.sliding and not self.holds(s.normal_N, q):
+            s.sliding = True
+            s.slide_start_s = t_next
+            if math.isnan(s.onset_s):
+                s.onset_s = t_next
+        if s.sliding:
+            # m a = Q - n mu_k F_n (N / kg = m/s^2 -> x 1e3 for mm/s^2), semi-implicit.
+            accel = 1e3 * (q - self.contacts * self.mu_k * s.normal_N) / self.mass_kg
+            speed = s.speed_mm_s + accel * h
+            if speed <= 0.0 and self.holds(s.normal_N, q):
+                s.sliding = False
+                s.speed_mm_s = 0.0
+                s.arrest_s = t_next
+            else:
+                s.speed_mm_s = max(speed, 0.0)
+            s.drop_mm += s.speed_mm_s * h
+            if s.drop_mm > self.travel_mm:
+                s.dropped = True
+        s.t = t_next
 
     def step(self) -> PlantState:
         """Advance one frame (``1 / rate_hz`` s, in ``substeps`` steps); the new state."""

@@ -1,0 +1,115 @@
+"""slipkit closedloop scenario=fsr: the prosthetic hold with knocks and a load increase, end to end."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
+
+from slipkit import config_dir
+from slipkit.closedloop.commands import closedloop_main, load_scenario, scenario_of
+from slipkit.closedloop.detectors import Detector, NoDetector
+from slipkit.closedloop.plant import PlantState
+from slipkit.sim.commands import build_scene
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory: pytest.TempPathFactory) -> pd.DataFrame:
+    """One small FSR run: the paper's detector (8 training trials), 1 seed, 1 trial per condition."""
+    out = tmp_path_factory.mktemp("fsr") / "cl"
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        cfg = compose(
+            config_name="closedloop",
+            overrides=[
+                "closedloop=fsr",
+                "demo=true",
+                "seeds=[0]",
+                "trials_per_speed=1",
+                "closedloop.demo.detectors=[fsr_paper]",
+                f"out={out}",
+            ],
+        )
+        closedloop_main(cfg)
+    yield pd.read_csv(out / "summary.csv").set_index("detector")
+    from hydra.core.global_hydra import GlobalHydra
+
+    GlobalHydra.instance().clear()
+
+
+def test_oracle_bounds_from_below_and_no_detector_from_above(
+    small: pd.DataFrame,
+) -> None:
+    """The oracle slides least and drops nothing; without a detector every object is dropped."""
+    slips = small.loc[small["kind"] == "bundle", "slip_mm"].dropna()
+    assert (True, 0.0, 100.0) == (
+        bool(float(small.loc["oracle", "slip_mm"]) <= slips.min()),
+        float(small.loc["oracle", "dropped_pct"]),
+        float(small.loc["none", "dropped_pct"]),
+    )
+
+
+class _DeclareAt(Detector):
+    """Declares slip on the first frame at or after ``t_s`` (a false alarm during the hold)."""
+
+    def __init__(self, t_s: float) -> None:
+        self.name = "declare_at"
+        self.t_s = t_s
+
+    def decide(self, state: PlantState, frame) -> bool:  # type: ignore[no-untyped-def]
+        del frame
+        return abs(state.t - self.t_s) < 0.25e-3
+
+
+def test_false_alarm_raises_grip_force() -> None:
+    """A declaration during the hold steps the grip up: extra force (N) and impulse (N s) above zero."""
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        cfg = compose(config_name="closedloop", overrides=["closedloop=fsr"])
+        scen = load_scenario(cfg)
+        scene = build_scene(
+            compose("train", [f"scene={scen.scene}", *list(scen.scene_overrides)]).scene
+        )
+    scenario = scenario_of(scen)
+    plant = OmegaConf.to_container(scen.plant, resolve=True)
+    kw = {"seed": 0, "condition_index": 0, "trial": 0, "condition": 0.25}
+    base = scenario.run_trial(scene, NoDetector(), plant, **kw)
+    alarm = scenario.run_trial(scene, _DeclareAt(0.4), plant, **kw)
+    step = float(plant["step_frac"])
+    assert (False, True, True, True) == (
+        base.false_alarm,
+        alarm.false_alarm,
+        math.isclose(alarm.declared_s, 0.4, abs_tol=1e-3),
+        bool(alarm.extra_force_N > 0.5 * step * 1.0 and alarm.extra_impulse_Ns > 0),
+    )
+
+
+def test_sensor_voltage_rises_when_the_grip_falls() -> None:
+    """The FSR frame follows the paper's falling divider: less grip, higher voltage (V)."""
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        cfg = compose(config_name="closedloop", overrides=["closedloop=fsr"])
+        scen = load_scenario(cfg)
+        scene_cfg = compose("train", [f"scene={scen.scene}"]).scene
+    OmegaConf.set_struct(scene_cfg, False)
+    scene_cfg.effects = {}  # no noise, knocks or slip events: the calibration alone
+    from slipkit.closedloop.fsr import FSRSensor
+
+    sensor = FSRSensor(
+        build_scene(scene_cfg),
+        np.random.default_rng(0),
+        t=np.arange(100) / 2000.0,
+        hold_s=(0.0, 0.05),
+        hold_N=2.0,
+        pass_mm=12.7,
+    )
+    volts = [
+        float(
+            sensor.frame(PlantState(t=0.01, indentation_mm=0, arm_mm_s=0, normal_N=f))[
+                0
+            ]
+        )
+        for f in (0.0, 1.0, 3.0)
+    ]
+    assert (4.5, True) == (round(volts[0], 3), volts[0] > volts[1] > volts[2])
