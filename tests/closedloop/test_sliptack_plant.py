@@ -18,6 +18,7 @@ from slipkit.closedloop.plant import PlantState
 from slipkit.closedloop.sliptack import (
     NibOscillator,
     SlipTackPlant,
+    SlipTackScenario,
     SlipTackSensor,
     check_plant,
     run_sliptack_trial,
@@ -224,3 +225,30 @@ def test_bad_plant_parameter_is_refused(key: str, value: Any, match: str) -> Non
     """A plant parameter out of range is a SlipkitError naming closedloop.plant.<key>."""
     with pytest.raises(SlipkitError, match=match):
         check_plant({**PLANT, key: value})
+
+
+@pytest.mark.parametrize(
+    ("pull_speeds", "drop", "expected"),
+    [
+        ({"lo": 10.0, "hi": 100.0, "n": 3}, True, [10.0, 31.6, 100.0, 0.0]),
+        ({"lo": 10.0, "hi": 100.0, "n": 0}, True, [0.0]),
+        ({"lo": 50.0, "hi": 50.0, "n": 1}, False, [50.0]),
+    ],
+)
+def test_conditions_are_the_pull_speeds_then_the_drop(
+    pull_speeds: dict[str, Any], drop: bool, expected: list[float]
+) -> None:
+    """The grid is the log-spaced pull speeds (mm/s), then 0 for the drop when enabled."""
+    scen = OmegaConf.create({"pull_speeds": pull_speeds, "drop": drop})
+    assert expected == SlipTackScenario().conditions(scen)
+
+
+def test_no_condition_is_refused() -> None:
+    """No pull speed and no drop is a SlipkitError naming both options."""
+    scen = OmegaConf.create(
+        {"pull_speeds": {"lo": 10.0, "hi": 100.0, "n": 0}, "drop": False}
+    )
+    with pytest.raises(
+        SlipkitError, match=r"pull_speeds\.n=0 and closedloop\.drop=false"
+    ):
+        SlipTackScenario().conditions(scen)

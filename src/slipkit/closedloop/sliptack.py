@@ -715,8 +715,28 @@ class SlipTackScenario:
     def conditions(self, scen: DictConfig) -> list[float]:
         """``pull_speeds.n`` log-spaced pull speeds (mm/s), then 0 (the drop) if ``drop``."""
         sp = scen.pull_speeds
-        out = speed_grid(float(sp.lo), float(sp.hi), int(sp.n)) if int(sp.n) else []
-        return [*out, 0.0] if bool(scen.get("drop", True)) else out
+        lo, hi, n = sp.get("lo"), sp.get("hi"), sp.get("n")
+        if not (isinstance(n, int) and not isinstance(n, bool) and n >= 0):
+            raise SlipkitError(
+                f"closedloop.pull_speeds.n: expected a whole number >= 0; got {n!r}"
+            )
+        numbers = all(
+            isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+            for v in (lo, hi)
+        )
+        if n and not (numbers and 0 < lo <= hi):
+            raise SlipkitError(
+                f"closedloop.pull_speeds: expected 0 < lo <= hi (mm/s); got lo={lo!r}, "
+                f"hi={hi!r}"
+            )
+        out = speed_grid(float(lo), float(hi), n) if n else []
+        if bool(scen.get("drop", True)):
+            out = [*out, 0.0]
+        if not out:
+            raise SlipkitError(
+                "closedloop.pull_speeds.n=0 and closedloop.drop=false: no condition to run"
+            )
+        return out
 
     def run_trial(
         self,
