@@ -23,12 +23,25 @@ Unified columns (:data:`ROW_COLUMNS`; a missing one is NaN):
 * the window: ``window_frames`` and ``window_ms`` (sensor frames the estimator reads
   for one decision) and ``decision_frames`` (frames from the first one it reads to a
   declared slip, with the online debounce).
+
+Trial events (TacTip, issue 14's target measure; beside :data:`ROW_COLUMNS`, see
+:func:`trial_events`): the TacTip frame task (SVMs) labels 4 slip frames per trial and
+the stream task (pin-motion detector) every frame from the onset on, so their frame
+rates measure two different things. Both tasks' decision rules (the frame task's
+debounced online rule, the detector's own ``consecutive`` frames) give each test trial
+a first alarm, on the same camera frames of the same trials, so the comparison ranks
+them on ``on_time_rate``: the fraction of test trials whose slip's first alarm comes
+0 to :data:`ON_TIME_FRAMES` frames after the onset frame (no alarm before it), a trial
+without slip counting when nothing fires. Beside it: ``no_early_alarm_rate`` (trials
+with no alarm before the onset, or none at all without slip), ``late_slips`` (first
+alarm later than that), ``event_trials``; ``missed`` and ``delay_ms`` stay the tasks'
+own.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -63,6 +76,11 @@ ROW_COLUMNS = (
 )
 
 
+#: frames after the onset frame within which a slip's first alarm is on time (issue 14's
+#: TacTip target: "within 2 frames of onset, with no alarm before onset")
+ON_TIME_FRAMES = 2
+
+
 @dataclass
 class Evaluation:
     """One estimator's scores on the shared test side, in comparison terms.
@@ -86,6 +104,9 @@ class Evaluation:
         What the task recorded as its split (checked equal across estimators).
     search : DataFrame or None
         ``number`` and ``value`` (CV score) of each in-run search trial, in order.
+    trial_events : DataFrame or None
+        Per test trial (TacTip): ``trial_id``, ``onset_frame`` and ``first_alarm_frame``
+        (velocity frames, NaN: none), ``outcome`` (:func:`trial_events`).
     """
 
     row: dict[str, Any] = field(default_factory=dict)
@@ -96,6 +117,7 @@ class Evaluation:
     vs_width: pd.DataFrame | None = None
     split: Any = None
     search: pd.DataFrame | None = None
+    trial_events: pd.DataFrame | None = None
 
 
 @dataclass(frozen=True)
@@ -200,6 +222,122 @@ def _false_alarms(
     return alarms, negatives / rate_hz / 60.0
 
 
+def trial_events(
+    trial_ids: Sequence[str],
+    onset_frames: Sequence[int | None],
+    first_alarms: Sequence[int | None],
+    *,
+    on_time_frames: int = ON_TIME_FRAMES,
+) -> tuple[dict[str, Any], pd.DataFrame]:
+    """Each trial's first alarm against its onset: the event columns and the per-trial table.
+
+    Parameters
+    ----------
+    trial_ids : sequence of str
+        The test trials.
+    onset_frames : sequence of int or None
+        Each trial's onset frame (None: no slip in the trial).
+    first_alarms : sequence of int or None
+        The frame of each trial's first alarm, in the same frames (None: none).
+    on_time_frames : int
+        Frames after the onset frame that are still on time.
+
+    Returns
+    -------
+    row : dict
+        ``on_time_rate`` (trials on time / trials: a slip whose first alarm is 0 to
+        ``on_time_frames`` frames after its onset frame, or a trial without slip and
+        without alarm), ``no_early_alarm_rate`` (trials without an alarm before the
+        onset, or without any alarm when there is no slip / trials), ``late_slips``
+        (first alarm later than ``on_time_frames``), ``event_trials``.
+    table : DataFrame
+        ``trial_id``, ``onset_frame``, ``first_alarm_frame`` (NaN: none), ``outcome``:
+        ``on_time``, ``early``, ``late``, ``missed`` (a slip trial) or ``quiet``,
+        ``false_alarm`` (a trial without slip).
+    """
+    outcomes = []
+    for onset, first in zip(onset_frames, first_alarms, strict=True):
+        if onset is None:
+            outcomes.append("quiet" if first is None else "false_alarm")
+        elif first is None:
+            outcomes.append("missed")
+        elif first < onset:
+            outcomes.append("early")
+        else:
+            outcomes.append("on_time" if first - onset <= on_time_frames else "late")
+    n = len(outcomes)
+    good = sum(o in ("on_time", "quiet") for o in outcomes)
+    early = sum(o in ("early", "false_alarm") for o in outcomes)
+    row = {
+        "on_time_rate": good / n if n else math.nan,
+        "no_early_alarm_rate": (n - early) / n if n else math.nan,
+        "late_slips": sum(o == "late" for o in outcomes),
+        "event_trials": n,
+    }
+    table = pd.DataFrame(
+        {
+            "trial_id": [str(t) for t in trial_ids],
+            "onset_frame": [math.nan if v is None else v for v in onset_frames],
+            "first_alarm_frame": [math.nan if v is None else v for v in first_alarms],
+            "outcome": outcomes,
+        }
+    )
+    return row, table
+
+
+def _first(flags: np.ndarray) -> int | None:
+    hit = np.flatnonzero(flags)
+    return int(hit[0]) if len(hit) else None
+
+
+def frame_task_events(
+    table: pd.DataFrame, positive: str, debounce_k: int
+) -> tuple[dict[str, Any], pd.DataFrame]:
+    """:func:`trial_events` of a per-velocity-frame predictions table (TacTip frame task).
+
+    The onset frame is a trial's first frame labelled ``positive`` (the task labels the
+    onset's velocity frame and the next ``n_slip - 1``); the first alarm is the first
+    frame of the debounced online rule (``debounce_k`` consecutive slip predictions),
+    as the task's own detection delay.
+    """
+    from slipkit.models.online import first_detection
+
+    ids, onsets, firsts = [], [], []
+    for tid, g in table.groupby("trial_id", sort=False):
+        ids.append(str(tid))
+        onsets.append(_first((g["label"].astype(str) == positive).to_numpy()))
+        pred = (g["pred"].astype(str) == positive).to_numpy()
+        firsts.append(first_detection(pred, int(debounce_k)))
+    return trial_events(ids, onsets, firsts)
+
+
+def stream_task_events(
+    t: np.ndarray,
+    fired: np.ndarray,
+    bounds: Sequence[tuple[int, int]],
+    onset_s: np.ndarray,
+    trial_ids: Sequence[str],
+) -> tuple[dict[str, Any], pd.DataFrame]:
+    """:func:`trial_events` of a stream detector's per-sample decisions (TacTip pins).
+
+    Samples are camera frames; in the frame task's terms sample ``j + 1`` ends velocity
+    frame ``j``, so the onset frame is the velocity frame whose interval holds the
+    onset (:func:`slipkit.features.pins.onset_velocity_index`) and an alarm at sample
+    ``s`` is at velocity frame ``s - 1``.
+    """
+    from slipkit.features.pins import onset_velocity_index
+
+    onsets, firsts = [], []
+    for k, (a, b) in enumerate(bounds):
+        ts = t[a:b]
+        onsets.append(
+            onset_velocity_index(ts, float(onset_s[k])) if b - a >= 2 else None
+        )
+        first = _first(fired[a:b])
+        firsts.append(None if first is None else first - 1)
+    return trial_events(list(trial_ids), onsets, firsts)
+
+
 # -- TacTip frames --------------------------------------------------------------------
 
 
@@ -217,6 +355,8 @@ def adapt_tactip(view: RunView) -> Evaluation:
     delays = [d * 1000.0 / rate for d in det["delay_frames"] if d is not None]
     preds = pd.read_csv(view.folder / "test_predictions.csv")
     alarms, minutes = _false_alarms(preds, SLIP, int(task.debounce_k), rate)
+    events, event_table = frame_task_events(preds, SLIP, int(task.debounce_k))
+    row.update(events)
     row.update(
         delay_ms=_num(det["median_ms"]),
         missed=int(det["missed"]),
@@ -256,6 +396,7 @@ def adapt_tactip(view: RunView) -> Evaluation:
         delays_ms=delays,
         split=view.metrics["split"],
         search=search,
+        trial_events=event_table,
     )
 
 
@@ -394,12 +535,25 @@ def adapt_detection(view: RunView) -> Evaluation:
     rec = task.recordings(test_ds, task.stream, task.channels)
     scores = np.asarray(view.model.decision_function(rec.X, segments=rec.segments))
     roc = _roc(rec.y > 0, scores, (row["fpr"], row["tpr"]), "samples")
+    event_table = None
+    if str(view.dataset.sensor) == "tactip":
+        # the TacTip event measure, on the frames the frame task scores (module notes);
+        # the task's own rule: slip where the score reaches the threshold
+        events, event_table = stream_task_events(
+            rec.t,
+            scores >= float(view.model.threshold_),
+            rec.bounds(),
+            rec.onset_s,
+            rec.trial_ids,
+        )
+        row.update(events)
     return Evaluation(
         row=row,
         confusion=(["no slip", "slip"], cm),
         roc=roc,
         delays_ms=delays,
         split=m["split"],
+        trial_events=event_table,
     )
 
 
@@ -539,10 +693,14 @@ def _register_builtin() -> None:
 _register_builtin()
 
 __all__ = [
+    "ON_TIME_FRAMES",
     "ROW_COLUMNS",
     "Evaluation",
     "RunView",
     "adapt",
     "binary_rates",
+    "frame_task_events",
     "register_adapter",
+    "stream_task_events",
+    "trial_events",
 ]

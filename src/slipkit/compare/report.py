@@ -34,6 +34,10 @@ MAIN = (
     ("event_tpr", "event TPR", "{:.3f}"),
     ("event_tnr", "event TNR", "{:.3f}"),
     ("event_auc", "event AUC", "{:.3f}"),
+    # TacTip trial events (adapters.trial_events): first alarm within 2 frames of onset
+    ("on_time_rate", "on time (<= 2 frames)", "{:.3f}"),
+    ("no_early_alarm_rate", "no early alarm", "{:.3f}"),
+    ("late_slips", "late", "{:.0f}"),
     ("delay_ms", "delay (ms, median)", "{:.1f}"),
     ("missed", "missed", "{:.0f}"),
     ("false_alarms_per_min", "false alarms / min", "{:.2f}"),
