@@ -1223,6 +1223,27 @@ def main() -> None:
         rows.append(
             ("FSRTouchSlip (confirmed)", det, export_fsr_touch_slip(det), Xh, sh)
         )
+    # mixed wirings (the hard scene): polarity per recording, the press_sign op before the
+    # graph (parity runs it over every call of each held-out recording, as the loop does)
+    import warnings
+
+    from slipkit.baselines.fsr import PolarityWarning
+
+    X, y, seg = _stack(
+        _simulate("fsr_probe_slide_hard", 4, 3), "fsr", ["voltage"], "slip_event"
+    )
+    Xh, _, sh = _stack(
+        _simulate("fsr_probe_slide_hard", 4, 4), "fsr", ["voltage"], "slip_event"
+    )
+    for name, kw in (
+        ("FSR per-recording", {}),
+        ("FSR per-rec. confirmed", {"confirm_events": 3, "confirm_window_s": 0.4}),
+    ):
+        det = FSRTouchSlip(threshold=8.0, **kw)  # type: ignore[arg-type]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", PolarityWarning)
+            det.fit(X, y, segments=seg)
+        rows.append((name, det, export_fsr_touch_slip(det), Xh, sh))
     fit_ds, held = (
         _simulate("biotac_lift_slip", 3, 5),
         _simulate("biotac_lift_slip", 3, 6),
