@@ -362,7 +362,6 @@ class SlipTackPlant:
             arm_mm_s=0.0,
             normal_N=self.k_a * self.grip_mm,
         )
-        self.state.slide_start_s = math.nan
 
     def load(self, t: float) -> float:
         """Tangential load on the object at ``t``, N."""
@@ -414,6 +413,7 @@ class SlipTackPlant:
         s.arm_mm_s = (x - x_old) / h
         s.normal_N = self.k_a * x
         q = self.load(t_next)
+        s.load_N = q
         if not s.sliding and q > self.mu_s * s.normal_N:
             s.sliding = True
             s.slide_start_s = t_next  # what the oracle times its delay from
