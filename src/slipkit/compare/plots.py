@@ -231,21 +231,32 @@ def plot_delays(evals: Mapping[str, Evaluation], path: Path) -> Path | None:
         ax.scatter(v, i + rng.uniform(-0.15, 0.15, len(v)), s=10, alpha=0.6)
     ax.axvline(0.0, color="k", lw=0.8, ls=":")
     ax.set_xlabel("detection delay after the true slip onset (ms)")
+    ax.set_ylabel("estimator")
     ax.grid(alpha=0.3, axis="x")
     return _save(fig, path)
 
 
 def plot_latency(costs: Mapping[str, Any], path: Path) -> Path | None:
-    """Per-decision latency histograms (us) of the exported estimators, the p99 budget as a line."""
+    """Per-decision latency histograms (us) of the exported estimators on one shared x axis.
+
+    The dashed red line is the p99 budget and the dotted black line the p99 it is
+    checked on (:func:`slipkit.compare.table.block_p99`: the median of 5 block p99s).
+    The x axis ends at 1.5 x the largest p99 or budget; slower decisions (stalls) are
+    counted into the last bin and their number given in the panel's title.
+    """
     data = {k: c for k, c in costs.items() if c.exported and len(c.latency_us)}
     if not data:
         return None
+    hi = 1.5 * max(
+        max(float(c.p99_us) for c in data.values()),
+        max(float(c.budget_p99_us) for c in data.values()),
+    )
     fig, axes = plt.subplots(
-        len(data), 1, figsize=(6.4, 1.2 + 1.5 * len(data)), squeeze=False
+        len(data), 1, figsize=(6.4, 1.2 + 1.5 * len(data)), squeeze=False, sharex=True
     )
     for ax, (name, c) in zip(axes[:, 0], data.items(), strict=True):
-        lat = c.latency_us
-        hi = max(float(np.percentile(lat, 99.5)), c.budget_p99_us) * 1.1
+        lat = np.asarray(c.latency_us, dtype=float)
+        over = int((lat > hi).sum())
         ax.hist(
             np.clip(lat, 0, hi), bins=60, range=(0, hi), color="tab:blue", alpha=0.8
         )
@@ -254,11 +265,22 @@ def plot_latency(costs: Mapping[str, Any], path: Path) -> Path | None:
             color="tab:red",
             ls="--",
             lw=1.2,
-            label=f"p99 budget {c.budget_p99_us:g} us",
+            label=f"p99 budget {c.budget_p99_us:.4g} us",
         )
-        ax.axvline(c.p99_us, color="k", ls=":", lw=1.2, label=f"p99 {c.p99_us:.1f} us")
-        ax.set_title(f"{name}: p50 {c.p50_us:.1f} us, {len(lat)} decisions", fontsize=9)
-        ax.legend(fontsize=7)
+        ax.axvline(
+            c.p99_us,
+            color="k",
+            ls=":",
+            lw=1.2,
+            label=f"p99 {c.p99_us:.1f} us (checked)",
+        )
+        title = f"{name}: p50 {c.p50_us:.1f} us, {len(lat)} decisions"
+        if over:
+            title += f", {over} above {hi:.0f} us (last bin)"
+        ax.set_title(title, fontsize=9)
+        ax.set_ylabel("decisions (count)", fontsize=8)
+        ax.legend(fontsize=7, loc="upper right")
+    axes[-1, 0].set_xlim(0, hi)
     axes[-1, 0].set_xlabel("frame arrival -> decision (us)")
     return _save(fig, path)
 
@@ -274,7 +296,7 @@ def plot_search(evals: Mapping[str, Evaluation], path: Path) -> Path | None:
         ax.plot(h["number"] + 1, v, "o", ms=3, alpha=0.5)
         ax.plot(h["number"] + 1, np.fmax.accumulate(v), label=f"{name} (best so far)")
     ax.set_xlabel("search trials (count, Optuna TPE)")
-    ax.set_ylabel("cross-validated score (the task's objective, training side)")
+    ax.set_ylabel("cross-validated objective (its unit; training side)")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     return _save(fig, path)
@@ -311,9 +333,9 @@ def plot_confusions(evals: Mapping[str, Evaluation], path: Path) -> Path | None:
             fontsize=7,
         )
         ax.set_yticks(range(len(labels)), labels, fontsize=7)
-        ax.set_title(name, fontsize=9)
-        ax.set_xlabel("predicted", fontsize=8)
-    axes[0, 0].set_ylabel("true", fontsize=8)
+        ax.set_title(f"{name} (counts)", fontsize=9)
+        ax.set_xlabel("predicted class", fontsize=8)
+    axes[0, 0].set_ylabel("true class", fontsize=8)
     return _save(fig, path)
 
 
