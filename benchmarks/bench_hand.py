@@ -20,6 +20,13 @@ over rounds of each run's p50 / p99 (us), the decisions over the stream's own p9
 budget (summed over rounds, out of all decisions) and the ratio hand p99 / alone p99.
 
     .venv/bin/python benchmarks/bench_hand.py [--seconds 3] [--rounds 3] [--keep DIR]
+
+``--walk`` instead runs the docs' multi-sensor walk on the same bundles (docs/deploy.md,
+"From the wheel to a running hand"): a ``DecisionReceiver`` on 127.0.0.1:9100,
+``slipkit-run --stream`` with two UDP inputs (index, palm) and one paced replay (ring)
+sending every decision to it, and two sensor bridges (``UdpSender``) sending the index
+and palm replays at their own rates; it prints slipkit-run's output and what the
+receiver got per stream index.
 """
 
 from __future__ import annotations
@@ -172,6 +179,76 @@ def _pct_us(lat_ns: np.ndarray) -> tuple[float, float]:
     return float(p50), float(p99)
 
 
+def walk(bundles: dict[str, Path]) -> None:
+    """The docs' walk: receiver, slipkit-run --stream with UDP inputs, two sensor bridges."""
+    import subprocess
+    import sys
+    import threading
+    import time
+
+    from slipkit.runtime import DecisionReceiver, UdpSender, load_bundle, load_replay
+
+    run = Path(sys.executable).with_name("slipkit-run")
+    got: list[Any] = []
+    with DecisionReceiver("127.0.0.1", 9100, timeout_s=3.0) as rx:
+        listener = threading.Thread(target=lambda: got.extend(rx))
+        listener.start()
+        cmd = [
+            str(run),
+            "--stream",
+            f"index={bundles['index']}@udp:127.0.0.1:9001",
+            "--stream",
+            f"palm={bundles['palm']}@udp:127.0.0.1:9004",
+            "--stream",
+            f"ring={bundles['ring']}",
+            "--pace",
+            "--send",
+            "127.0.0.1:9100",
+            "--timeout",
+            "1",
+            "--check",
+        ]
+        print("$ " + " ".join(cmd))
+        proc = subprocess.Popen(
+            cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        )
+        time.sleep(1.0)  # the listener starts before the sensors
+
+        def bridge(name: str, port: int) -> None:
+            b = load_bundle(bundles[name])
+            f = b.manifest.frame
+            frames, ts = load_replay(b.replay_path, f.shape, f.rate_hz)
+            with UdpSender("127.0.0.1", port) as tx:
+                t0 = time.perf_counter()
+                for i, (t, values) in enumerate(zip(ts.tolist(), frames, strict=True)):
+                    lag = t - float(ts[0]) - (time.perf_counter() - t0)
+                    if lag > 0:
+                        time.sleep(lag)
+                    tx.send(i, t, values)
+
+        bridges = [
+            threading.Thread(target=bridge, args=a)
+            for a in (("index", 9001), ("palm", 9004))
+        ]
+        for t in bridges:
+            t.start()
+        for t in bridges:
+            t.join()
+        out, err = proc.communicate(timeout=120)
+        listener.join()
+    print(err.rstrip())
+    print(out.rstrip())
+    print(f"exit status {proc.returncode}")
+    by: dict[int, int] = {}
+    for d in got:
+        by[d.stream] = by.get(d.stream, 0) + 1
+    print(
+        f"receiver: {len(got)} decisions; by stream index: {dict(sorted(by.items()))}"
+    )
+    if got:
+        print(f"first: {got[0]}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     ap.add_argument("--seconds", type=float, default=3.0, help="sensor time per run, s")
@@ -179,6 +256,7 @@ def main() -> None:
     ap.add_argument(
         "--keep", type=Path, default=None, help="keep runs and bundles here"
     )
+    ap.add_argument("--walk", action="store_true", help="run the docs' walk instead")
     args = ap.parse_args()
 
     import onnxruntime as ort
@@ -186,6 +264,9 @@ def main() -> None:
     root = args.keep or Path(tempfile.mkdtemp(prefix="bench_hand-"))
     names = list(HAND)
     bundles = make_bundles(root, names)
+    if args.walk:
+        walk(bundles)
+        return
     configs = ["alone", "loop", "threads"]
     # name -> config -> list of (p50, p99, over, decisions) per round
     acc: dict[str, dict[str, list[tuple[float, float, int, int]]]] = {

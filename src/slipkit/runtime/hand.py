@@ -572,7 +572,7 @@ def table_lines(summaries: list[dict[str, Any]]) -> list[str]:
     """The per-stream table ``slipkit-run --stream`` prints."""
     head = (
         f"{'stream':<12} {'bundle':<16} {'frames':>7} {'decisions':>9} {'bad':>5} "
-        f"{'skipped':>7} {'p50 ms':>8} {'p99 ms':>8} {'max ms':>8} {'budget':>8} "
+        f"{'skipped':>7} {'p50 ms':>8} {'p99 ms':>8} {'max ms':>8} {'budget ms':>9} "
         f"{'over':>5}  verdict"
     )
     lines = [head]
@@ -587,7 +587,7 @@ def table_lines(summaries: list[dict[str, Any]]) -> list[str]:
             f"{s['stream'][:12]:<12} {s['bundle'][:16]:<16} {s['frames']:>7} "
             f"{s['decisions']:>9} {s['bad_frames']:>5} {s['skipped_windows']:>7} "
             f"{_ms(lat.get('p50')):>8} {_ms(lat.get('p99')):>8} {_ms(lat.get('max')):>8} "
-            f"{s['budget_ms']['p99']:>8g} {s['over_budget']:>5}  {verdict}"
+            f"{s['budget_ms']['p99']:>9.4f} {s['over_budget']:>5}  {verdict}"
         )
     return lines
 
