@@ -102,12 +102,12 @@ def aggregate(
         t = stats.t.ppf(0.5 + float(confidence) / 2.0, np.where(k > 1, k - 1, np.nan))
         half = t * std.to_numpy(np.float64) / np.sqrt(k)
     ci = pd.DataFrame(half, index=std.index, columns=cols)
-    out = pd.DataFrame({"n": n})
+    parts: dict[str, pd.Series] = {"n": n}
     for c in cols:
-        out[f"{c}_mean"] = mean[c]
-        out[f"{c}_std"] = std[c]
-        out[f"{c}_ci"] = ci[c]
-    return out.reset_index()
+        parts[f"{c}_mean"] = mean[c]
+        parts[f"{c}_std"] = std[c]
+        parts[f"{c}_ci"] = ci[c]
+    return pd.concat(parts, axis=1).reset_index()
 
 
 __all__ = ["aggregate"]
