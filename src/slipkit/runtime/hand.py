@@ -407,9 +407,7 @@ def _run_loop(streams: list[HandStream], start_ns: int) -> None:
     polls_lsl = False
     for s in streams:
         src = s.source
-        if isinstance(src, ReplayFeed):
-            src.start(start_ns)
-        else:
+        if not isinstance(src, ReplayFeed):
             try:
                 src.start_polling()
             except _STREAM_ERRORS as exc:
@@ -419,6 +417,11 @@ def _run_loop(streams: list[HandStream], start_ns: int) -> None:
                 sel.register(src.sock, selectors.EVENT_READ)
             else:
                 polls_lsl = True
+    # Paced replays start after the live sources are open (an LSL inlet resolves first).
+    start_ns = max(start_ns, time.perf_counter_ns())
+    for s in streams:
+        if isinstance(s.source, ReplayFeed):
+            s.source.start(start_ns)
     active = [s for s in streams if s.error is None]
     clock = time.perf_counter_ns
     woke = clock()
