@@ -51,6 +51,25 @@ def test_a_row_firing_on_more_disturbances_than_the_limit_is_passed_over() -> No
     ) == choice.passed_over
 
 
+def test_the_disturbance_rate_is_named_before_a_noisy_p99() -> None:
+    """A knock-prone row that is also over budget is passed over for its rate (stable)."""
+    df = build_table(
+        [_row("a", 0.9, 0.5, p99=80.0), _row("b", 0.8, 0.0)], "balanced_accuracy"
+    )
+    choice = choose_deploy(df, max_alarms_per_disturbance=0.1)
+    assert (("a", "fires on 50 % of disturbances > 10 %"),) == choice.passed_over
+
+
+def test_an_unexported_row_is_named_as_such_before_its_rate() -> None:
+    """Not exported comes first: there is no bundle to deploy whatever the rate."""
+    df = build_table(
+        [_row("a", 0.9, 0.5, export="not exportable: x"), _row("b", 0.8, 0.0)],
+        "balanced_accuracy",
+    )
+    choice = choose_deploy(df, max_alarms_per_disturbance=0.1)
+    assert (("a", "not exportable: x"),) == choice.passed_over
+
+
 def test_without_a_limit_the_rule_is_unchanged() -> None:
     """choose_deploy(df) keeps ranking by score alone (backward compatible)."""
     assert "window_logreg" == choose_deploy(_fsr_like()).row["estimator"]
