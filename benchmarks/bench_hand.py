@@ -41,6 +41,7 @@ import contextlib  # noqa: E402
 import io  # noqa: E402
 import platform  # noqa: E402
 import tempfile  # noqa: E402
+import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
@@ -143,9 +144,17 @@ def tiled_replay(bundle: Any, n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def run_once(
-    bundles: dict[str, Path], names: list[str], mode: str, seconds: float
+    bundles: dict[str, Path],
+    names: list[str],
+    mode: str,
+    seconds: float,
+    *,
+    pace: bool = True,
 ) -> dict[str, Any]:
-    """Run ``names`` together (one name: alone), paced; per stream: latency ns, budget ms."""
+    """Run ``names`` together (one name: alone); per stream: latency ns, budget ms.
+
+    Also ``"_cpu"``: the process's CPU time over the run's wall time (1.0 = one core).
+    """
     from slipkit.runtime import StreamLoop, load_bundle
     from slipkit.runtime.hand import HandStream, ReplayFeed, StreamBinding, run_streams
 
@@ -155,10 +164,12 @@ def run_once(
         bundle = load_bundle(bundles[name])
         n = max(int(seconds * bundle.manifest.frame.rate_hz), 1)
         frames, times = tiled_replay(bundle, n)
-        source = ReplayFeed(frames, times, pace=True)
+        source = ReplayFeed(frames, times, pace=pace)
         streams.append(HandStream(i, binding, bundle, StreamLoop(bundle), source))
+    cpu0, wall0 = time.process_time(), time.perf_counter()
     run_streams(streams, mode, start_delay_s=0.05)
-    out = {}
+    cpu = (time.process_time() - cpu0) / (time.perf_counter() - wall0)
+    out: dict[str, Any] = {"_cpu": cpu}
     for s in streams:
         assert s.error is None, s.error
         assert s.result is not None
@@ -267,18 +278,35 @@ def main() -> None:
     if args.walk:
         walk(bundles)
         return
-    configs = ["alone", "loop", "threads"]
+    # Paced (the sensors' rates): alone, the hand in one loop, the hand in threads;
+    # unpaced (as fast as taken): alone and the hand in one loop (compute only).
+    configs = ["alone", "loop", "threads", "alone_fast", "loop_fast"]
     # name -> config -> list of (p50, p99, over, decisions) per round
     acc: dict[str, dict[str, list[tuple[float, float, int, int]]]] = {
         n: {c: [] for c in configs} for n in names
     }
+    cpu: dict[str, list[float]] = {"alone": [], "loop": [], "threads": []}
     meta: dict[str, dict[str, Any]] = {}
     for _ in range(args.rounds):
-        runs: dict[str, dict[str, Any]] = {"loop": {}, "threads": {}, "alone": {}}
+        runs: dict[str, dict[str, Any]] = {c: {} for c in configs}
+        alone_cpu = 0.0
         for name in names:
-            runs["alone"].update(run_once(bundles, [name], "loop", args.seconds))
-        runs["loop"] = run_once(bundles, names, "loop", args.seconds)
-        runs["threads"] = run_once(bundles, names, "threads", args.seconds)
+            r = run_once(bundles, [name], "loop", args.seconds)
+            alone_cpu += r.pop("_cpu")
+            runs["alone"].update(r)
+            r = run_once(bundles, [name], "loop", args.seconds, pace=False)
+            r.pop("_cpu")
+            runs["alone_fast"].update(r)
+        cpu["alone"].append(alone_cpu)
+        for c, mode, pace in (
+            ("loop", "loop", True),
+            ("threads", "threads", True),
+            ("loop_fast", "loop", False),
+        ):
+            runs[c] = run_once(bundles, names, mode, args.seconds, pace=pace)
+            used = runs[c].pop("_cpu")
+            if c in cpu:
+                cpu[c].append(used)
         for c in configs:
             for name, r in runs[c].items():
                 lat = r["lat_ns"]
@@ -290,19 +318,20 @@ def main() -> None:
     print(
         f"onnxruntime {ort.__version__}, numpy {np.__version__}, {os.cpu_count()} CPUs "
         f"({platform.machine()}), load average {load:.1f}; {args.rounds} rounds x "
-        f"{args.seconds:g} s of sensor time per run, paced; us; median over rounds"
+        f"{args.seconds:g} s of sensor time per run; us; median over rounds"
     )
     print()
+    print("Paced at the sensors' rates:")
+    print()
     print(
-        "| stream | bundle | rate Hz | budget p99 | alone p50 / p99 | hand (loop) p50 / p99 "
+        "| stream | rate Hz | budget p99 | alone p50 / p99 | hand (loop) p50 / p99 "
         "| loop / alone p99 | hand (threads) p50 / p99 | threads / alone p99 "
-        "| over budget alone / loop / threads | hand met (loop / threads) |"
+        "| over budget alone / loop / threads (of decisions) | hand met (loop / threads) |"
     )
-    print("|" + "---|" * 11)
+    print("|" + "---|" * 10)
+    med: dict[str, dict[str, tuple[float, float, int, int]]] = {}
     for name in names:
-        m = meta[name]
-        budget_us = m["budget_ms"] * 1e3
-        med = {
+        med[name] = {
             c: (
                 float(np.median([r[0] for r in acc[name][c]])),
                 float(np.median([r[1] for r in acc[name][c]])),
@@ -311,14 +340,33 @@ def main() -> None:
             )
             for c in configs
         }
-        a, lo, th = med["alone"], med["loop"], med["threads"]
+        m = meta[name]
+        budget_us = m["budget_ms"] * 1e3
+        a, lo, th = med[name]["alone"], med[name]["loop"], med[name]["threads"]
         print(
-            f"| {name} ({HAND[name][1]}) | {m['bundle']} | {m['rate_hz']:g} | "
-            f"{budget_us:.0f} | {a[0]:.1f} / {a[1]:.1f} | {lo[0]:.1f} / {lo[1]:.1f} | "
+            f"| {name}: {HAND[name][1]} | {m['rate_hz']:g} | {budget_us:.0f} | "
+            f"{a[0]:.1f} / {a[1]:.1f} | {lo[0]:.1f} / {lo[1]:.1f} | "
             f"{lo[1] / a[1]:.2f}x | {th[0]:.1f} / {th[1]:.1f} | {th[1] / a[1]:.2f}x | "
-            f"{a[2]} / {lo[2]} / {th[2]} of {a[3]} / {lo[3]} / {th[3]} | "
+            f"{a[2]} / {lo[2]} / {th[2]} (of {a[3]}) | "
             f"{'yes' if lo[1] <= budget_us else 'no'} / "
             f"{'yes' if th[1] <= budget_us else 'no'} |"
+        )
+    print()
+    print(
+        "CPU time / wall time of the paced runs (1.0 = one core): five bundles alone "
+        f"(summed) {np.median(cpu['alone']):.2f}, hand (loop) "
+        f"{np.median(cpu['loop']):.2f}, hand (threads) {np.median(cpu['threads']):.2f}"
+    )
+    print()
+    print("Unpaced (frames as fast as the loop takes them: compute per frame only):")
+    print()
+    print("| stream | alone p50 / p99 | hand (loop) p50 / p99 | loop / alone p50 |")
+    print("|" + "---|" * 4)
+    for name in names:
+        a, lo = med[name]["alone_fast"], med[name]["loop_fast"]
+        print(
+            f"| {name} | {a[0]:.1f} / {a[1]:.1f} | {lo[0]:.1f} / {lo[1]:.1f} | "
+            f"{lo[0] / a[0]:.2f}x |"
         )
     print()
     print(f"bundles: {root / 'exports'}")
