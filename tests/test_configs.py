@@ -22,6 +22,7 @@ GROUP_PRIMARY = {
     "deploy": "export",
     "comparison": "compare",
     "closedloop": "closedloop",
+    "search": "sweep",
 }
 PRIMARY = sorted(p.stem for p in CONFIGS.glob("*.yaml"))
 GROUP_FILES = sorted(

@@ -160,6 +160,20 @@ OPTIONS: dict[str, dict[str, Rule]] = {
         "overwrite": FLAG,
     },
     "evaluate": {"run": PATH, "dataset": PATH, "name": NAME.null()},
+    "sweep": {
+        "search": Rule(
+            "a search space of configs/search/ (search=<name>)",
+            lambda v: isinstance(v, DictConfig),
+            required=True,
+        ),
+        "n_trials": COUNT,
+        "study_name": NAME,
+        "out": PATH,
+        "storage": TEXT.null(),
+        "heartbeat_s": COUNT,
+        "grace_s": COUNT,
+        "max_retry": whole(0),
+    },
     "export": {
         "run": PATH,
         "out": TEXT.null(),

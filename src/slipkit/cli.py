@@ -41,6 +41,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "slipkit.train.commands:train_main",
         "train a model (experiment=...) and write a run folder",
     ),
+    "sweep": (
+        "slipkit.train.optuna_sweep:sweep_main",
+        "an Optuna study over train runs (experiment=... search=...); workers on any machine share it",
+    ),
     "evaluate": (
         "slipkit.train.commands:evaluate_main",
         "score a run on a dataset it was not trained on (run=... dataset=...)",

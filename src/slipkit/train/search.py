@@ -14,7 +14,7 @@ Every search is recorded in the run as a *selection* record
 (:func:`selection_record`): the method, the CV, the scoring, the chosen parameters,
 their validation score and every candidate's mean and standard deviation over the
 folds. :func:`group_cv` scores one fixed estimator the same way, so a task without a
-search still reports a validation score for the Hydra sweeper to optimise.
+search still reports a validation score for ``slipkit sweep`` to optimise.
 """
 
 from __future__ import annotations
@@ -201,8 +201,6 @@ def optuna_search(
         Per candidate: ``number``, ``value`` (mean), ``std``, ``folds`` and the
         parameters (flat, for tables), in the order they were tried.
     """
-    # optuna 2.10 imports alembic, which logs its plugin setup at INFO to our stdout log.
-    logging.getLogger("alembic").setLevel(logging.WARNING)
     import optuna
 
     if n_trials < 1:
