@@ -172,7 +172,7 @@ def test_spectral_regressor_learns_speed_from_the_vibration_frequency() -> None:
 def test_sliptack_spectral_regressor_beside_the_analytic_inversion(
     tmp_path: Path,
 ) -> None:
-    """SlipTack (hard pull): the learned spectral regressor beside eq. 3 inverted, not exportable."""
+    """SlipTack (hard pull): the learned spectral regressor beside eq. 3 inverted, both exported."""
     df = _run(
         tmp_path,
         "sliptack",
@@ -185,7 +185,7 @@ def test_sliptack_spectral_regressor_beside_the_analytic_inversion(
     kinds = dict(zip(df["estimator"], df["kind"], strict=True))
     assert {"exact": "analytic", "spectral_gbr": "learned"} == kinds
     exports = dict(zip(df["estimator"], df["export"], strict=True))
-    assert True == exports["spectral_gbr"].startswith("not exportable")  # noqa: E712
+    assert "ok" == exports["spectral_gbr"]  # exports since issue 14's exporter
     assert True == bool(np.isfinite(df["rmse"]).all())  # noqa: E712
 
 

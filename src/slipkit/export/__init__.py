@@ -22,6 +22,7 @@ from slipkit.export import force as _force  # noqa: F401
 from slipkit.export import generic as _generic  # noqa: F401
 from slipkit.export import sklearn as _sklearn  # noqa: F401
 from slipkit.export import sliptack as _sliptack  # noqa: F401
+from slipkit.export import spectral as _spectral  # noqa: F401
 from slipkit.export import svm as _svm  # noqa: F401
 from slipkit.export import tactip_detector as _tactip_detector  # noqa: F401
 from slipkit.export import torch as _torch  # noqa: F401

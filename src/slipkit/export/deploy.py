@@ -959,7 +959,16 @@ def _deploy_sliptack_speed(
         )
     reg = dict(options.get("regression") or {})
     threshold = float(reg.get("threshold") or 0.0)
-    detector = SpeedSlipDetector(speed=est, threshold=threshold).fit()
+    from slipkit.models.spectral import SpectralSpeedRegressor
+
+    if isinstance(est, SpectralSpeedRegressor):  # learned: export/spectral.py's graph
+        from slipkit.export.spectral import SpectralSlipDetector
+
+        detector = SpectralSlipDetector(speed=est, threshold=threshold).fit()
+        holds = f"SpectralSpeedRegressor ({est.model}, material '*')"
+    else:
+        detector = SpeedSlipDetector(speed=est, threshold=threshold).fit()
+        holds = f"StickSlipSpeed ({est.form} form, material '*')"
     split = run_metrics(run).get("split", {})
     if split.get("test"):
         test_ids = list(split["test"])
@@ -976,7 +985,7 @@ def _deploy_sliptack_speed(
         trials=trial_frames(dataset, test_ids, stream, channels),
         notes=[
             f"raw {stream!r} samples ({task.column}, mm) at {rate:g} Hz; the graph holds "
-            f"StickSlipSpeed ({est.form} form, material '*') on the last {int(est.window)} "
+            f"{holds} on the last {int(est.window)} "
             f"samples, called every {int(est.hop)} samples",
             f"decision: speed >= {threshold:g} mm/s (regression.threshold; no estimate: "
             "no slip)",
