@@ -17,7 +17,9 @@ Each round runs every bundle alone, then all five in one process in ``loop`` mod
 thread, round-robin) and in ``threads`` mode (one thread per stream), each for
 ``--seconds`` of sensor time, in that order; the table gives, per stream, the median
 over rounds of each run's p50 / p99 (us), the decisions over the stream's own p99
-budget (summed over rounds, out of all decisions) and the ratio hand p99 / alone p99.
+budget (summed over rounds, out of all decisions) and the ratio hand p99 / alone p99;
+for the runs alone, also the time of ``StreamLoop.step`` itself on a deciding frame
+(timed by a wrapper, which adds a fraction of a microsecond to those runs' latency).
 
     .venv/bin/python benchmarks/bench_hand.py [--seconds 3] [--rounds 3] [--keep DIR]
 
@@ -143,6 +145,20 @@ def tiled_replay(bundle: Any, n: int) -> tuple[np.ndarray, np.ndarray]:
     return frames[row], (times[row] - times[0]) + copy * span
 
 
+def _timed_step(step: Any, into: list[int]) -> Any:
+    """``step`` that appends its own duration (ns) to ``into`` when it made a decision."""
+    clock = time.perf_counter_ns
+
+    def timed(values: Any, timestamp: Any = None, arrival_ns: Any = None) -> Any:
+        t0 = clock()
+        out = step(values, timestamp, arrival_ns)
+        if out is not None:
+            into.append(clock() - t0)
+        return out
+
+    return timed
+
+
 def run_once(
     bundles: dict[str, Path],
     names: list[str],
@@ -159,13 +175,17 @@ def run_once(
     from slipkit.runtime.hand import HandStream, ReplayFeed, StreamBinding, run_streams
 
     streams = []
+    step_ns: dict[str, list[int]] = {}
     for i, name in enumerate(names):
         binding = StreamBinding(name, bundles[name])
         bundle = load_bundle(bundles[name])
         n = max(int(seconds * bundle.manifest.frame.rate_hz), 1)
         frames, times = tiled_replay(bundle, n)
         source = ReplayFeed(frames, times, pace=pace)
-        streams.append(HandStream(i, binding, bundle, StreamLoop(bundle), source))
+        loop = StreamLoop(bundle)
+        if len(names) == 1:  # alone: also time StreamLoop.step itself, per decision
+            loop.step = _timed_step(loop.step, step_ns.setdefault(name, []))  # type: ignore[method-assign]
+        streams.append(HandStream(i, binding, bundle, loop, source))
     cpu0, wall0 = time.process_time(), time.perf_counter()
     run_streams(streams, mode, start_delay_s=0.05)
     cpu = (time.process_time() - cpu0) / (time.perf_counter() - wall0)
@@ -179,6 +199,7 @@ def run_once(
             "frames": s.result.n_frames,
             "rate_hz": s.bundle.manifest.frame.rate_hz,
             "bundle": s.bundle.manifest.name,
+            "step_ns": np.asarray(step_ns.get(s.name, []), dtype=np.int64),
         }
     return out
 
@@ -286,6 +307,10 @@ def main() -> None:
         n: {c: [] for c in configs} for n in names
     }
     cpu: dict[str, list[float]] = {"alone": [], "loop": [], "threads": []}
+    # name -> config (alone, alone_fast) -> StreamLoop.step p50 per round, us
+    steps: dict[str, dict[str, list[float]]] = {
+        n: {"alone": [], "alone_fast": []} for n in names
+    }
     meta: dict[str, dict[str, Any]] = {}
     for _ in range(args.rounds):
         runs: dict[str, dict[str, Any]] = {c: {} for c in configs}
@@ -313,6 +338,8 @@ def main() -> None:
                 p50, p99 = _pct_us(lat)
                 over = int(np.sum(lat / 1e6 > r["budget_ms"]))
                 acc[name][c].append((p50, p99, over, len(lat)))
+                if c in ("alone", "alone_fast"):
+                    steps[name][c].append(float(np.percentile(r["step_ns"], 50)) / 1e3)
                 meta[name] = r
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(
@@ -360,13 +387,18 @@ def main() -> None:
     print()
     print("Unpaced (frames as fast as the loop takes them: compute per frame only):")
     print()
-    print("| stream | alone p50 / p99 | hand (loop) p50 / p99 | loop / alone p50 |")
-    print("|" + "---|" * 4)
+    print(
+        "| stream | alone p50 / p99 | hand (loop) p50 / p99 | loop / alone p50 "
+        "| alone: StreamLoop.step p50, unpaced / paced |"
+    )
+    print("|" + "---|" * 5)
     for name in names:
         a, lo = med[name]["alone_fast"], med[name]["loop_fast"]
+        st = steps[name]
         print(
             f"| {name} | {a[0]:.1f} / {a[1]:.1f} | {lo[0]:.1f} / {lo[1]:.1f} | "
-            f"{lo[0] / a[0]:.2f}x |"
+            f"{lo[0] / a[0]:.2f}x | {np.median(st['alone_fast']):.1f} / "
+            f"{np.median(st['alone']):.1f} |"
         )
     print()
     print(f"bundles: {root / 'exports'}")
