@@ -3,8 +3,8 @@
 ``train`` composes ``configs/train.yaml`` (an ``experiment=`` picks scene or
 source, model and task), builds every object with ``hydra.utils.instantiate``,
 lets the task split, fit and score, and writes the run folder atomically. It returns
-the task's objective so the Hydra Optuna sweeper (``-m hydra/sweeper=optuna``) can
-optimise across runs.
+the task's objective, which ``slipkit sweep`` (:mod:`slipkit.train.optuna_sweep`)
+optimises across runs.
 """
 
 from __future__ import annotations

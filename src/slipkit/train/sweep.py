@@ -1,5 +1,11 @@
 """What a ``slipkit train -m`` sweep chose: the best run by its validation objective.
 
+A multirun here is a grid (``slipkit train -m experiment=tactip_svm model.C=1,10,100``,
+Hydra's basic sweeper, run by any Hydra launcher). A search that proposes the next
+parameters from the previous results is ``slipkit sweep``
+(:mod:`slipkit.train.optuna_sweep`), an Optuna study with the same rule: ranked by the
+validation objective.
+
 Each job of a multirun writes ``job.json`` into its Hydra job folder
 (``<sweep dir>/<job number>/``): its run folder, its overrides and the run's objective
 (:func:`record_job`, called by ``slipkit train``). When the sweep ends, the Hydra
