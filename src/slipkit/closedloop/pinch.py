@@ -11,13 +11,14 @@ detection lets the object slide further or out of the grasp.
 Outcome columns (:class:`~slipkit.closedloop.run.Outcome`):
 
 * ``onset_s``: the plant's first slip onset; ``declared_s``: the first declaration;
-* ``false_alarm``: a declaration before the onset (or in a trial that never slipped);
-* ``delay_ms``: the first declaration at or after the onset, minus the onset (also
-  after an earlier false alarm: the controller is still acting);
-* ``extra_force_N`` / ``extra_impulse_Ns``: the grip force above what the same
-  controller gives with no detector (a shadow controller and actuator stepped in
-  lock-step), from the first false alarm to the onset (or the end): peak, N, and
-  integral, N s;
+* ``false_alarm``: a declaration while the object is stuck and has not slid for
+  ``grace_s`` (before the first onset, or between slides);
+* ``delay_ms``: the first other declaration during the first slide (or within
+  ``grace_s`` of its arrest), minus the onset (NaN: the first slide was missed);
+* ``extra_force_N`` / ``extra_impulse_Ns``: the grip force above a shadow
+  controller's, identical but told only the declarations that were not false alarms
+  (its own actuator stepped in lock-step), from the first false alarm to the end:
+  peak, N, and integral of the positive part, N s;
 * ``slip_mm``: the whole slide (all slides), the travel when dropped;
   ``onset_to_arrest_ms``: first onset to the latest re-stick.
 """
@@ -68,6 +69,9 @@ class PinchTrial:
         The shadow controller's actuator (same latency and lag).
     t_end : float
         Trial end, s.
+    grace_s : float
+        A declaration this long after a slide's arrest still counts for that slide, s
+        (assumption).
     """
 
     plant: PinchPlant
@@ -76,6 +80,7 @@ class PinchTrial:
     shadow: GripController
     shadow_actuator: Actuator
     t_end: float
+    grace_s: float = 0.05
 
 
 def run_pinch_trial(
@@ -112,21 +117,26 @@ def run_pinch_trial(
             frames += 1
             frame = partial(trial.sensor.frame, state, detector.channels)
             yes = detector.decide(state, frame)
+        false = False
         if yes:
             if math.isnan(declared):
                 declared = state.t
-            slipped = not math.isnan(state.onset_s)
-            if not slipped and math.isnan(first_false):
+            recent = not math.isnan(state.arrest_s) and (
+                state.t - state.arrest_s <= trial.grace_s
+            )
+            false = not state.sliding and not recent
+            if false and math.isnan(first_false):
                 first_false = state.t
-            if slipped and math.isnan(delay):
+            first_slide = state.slide_start_s == state.onset_s
+            if not false and first_slide and math.isnan(delay):
                 delay = (state.t - state.onset_s) * 1e3
         new = trial.controller.command(state, yes)
         if new is not None:
             plant.actuator.command(state.t, new)
-        shadow = trial.shadow.command(state, False)
+        shadow = trial.shadow.command(state, yes and not false)
         if shadow is not None:
             trial.shadow_actuator.command(state.t, shadow)
-        if not math.isnan(first_false) and math.isnan(state.onset_s):
+        if not math.isnan(first_false):
             extra = state.normal_N - shadow_force
             peak = max(peak, extra)
             impulse += max(extra, 0.0) * dt

@@ -138,6 +138,11 @@ class PlantState:
         Start of the current (or latest) slide, s (NaN until it slips).
     load_N : float
         Tangential load on the contact now, N (NaN where the plant does not track it).
+    tangential_N : float
+        Tangential force one contact transmits now, N: its share of the load while
+        stuck, kinetic friction while sliding (NaN where the plant does not track it).
+    normal_rate_N_s : float
+        Change of the grip force over the last frame, N/s (NaN where not tracked).
     """
 
     t: float
@@ -152,6 +157,8 @@ class PlantState:
     dropped: bool = False
     slide_start_s: float = math.nan
     load_N: float = math.nan
+    tangential_N: float = math.nan
+    normal_rate_N_s: float = math.nan
 
 
 class GraspPlant:
@@ -387,6 +394,8 @@ class PinchPlant:
             arm_mm_s=math.nan,
             normal_N=force,
             load_N=float(load(0.0)),
+            tangential_N=float(load(0.0)) / self.contacts,
+            normal_rate_N_s=0.0,
         )
 
     def holds(self, normal_N: float, load_N: float) -> bool:
@@ -416,16 +425,19 @@ class PinchPlant:
             s.drop_mm += s.speed_mm_s * h
             if s.drop_mm > self.travel_mm:
                 s.dropped = True
+        s.tangential_N = self.mu_k * s.normal_N if s.sliding else q / self.contacts
         s.t = t_next
 
     def step(self) -> PlantState:
         """Advance one frame (``1 / rate_hz`` s, in ``substeps`` steps); the new state."""
         h = 1.0 / self.rate_hz / self.substeps
+        before = self.state.normal_N
         for _ in range(self.substeps):
             if self.state.dropped:
                 self.state.t += h
                 continue
             self._substep(h)
+        self.state.normal_rate_N_s = (self.state.normal_N - before) * self.rate_hz
         return self.state
 
 
