@@ -7,6 +7,7 @@ Usage::
     slipkit-run exports/tactip_svm --udp 127.0.0.1:9000 --frames 1000
     slipkit-run exports/tactip_svm --udp 127.0.0.1:9000 --wait 0 --timeout 5
     slipkit-run exports/tactip_svm --choose-session      # measure session options
+    slipkit-run exports/sliptack --cpus 1 --realtime     # affinity, SCHED_FIFO, GC, threads
     slipkit-run exports/tactip_svm --udp 0.0.0.0:9000 --send 192.168.1.20:9100 --jsonl
     slipkit-run exports/tactip_svm --lsl TacTip --lsl-out SlipDecisions
     slipkit-run --stream index=bundles/biotac@udp:0.0.0.0:9001 \
@@ -44,6 +45,13 @@ from slipkit.runtime.errors import FrameError, OptionError
 from slipkit.runtime.hand import MODES, run_hand_cli
 from slipkit.runtime.loop import StreamLoop
 from slipkit.runtime.modules import heavy_modules_loaded
+from slipkit.runtime.realtime import (
+    RealtimeOptions,
+    apply_realtime,
+    frozen_gc,
+    options_from_text,
+    pinned_session,
+)
 from slipkit.runtime.sinks import Fanout, JsonlSink, UdpSink, parse_address
 from slipkit.runtime.sources import (
     DEFAULT_WAIT_S,
@@ -205,6 +213,43 @@ def _parser() -> argparse.ArgumentParser:
         "--report-modules",
         action="store_true",
         help="print (and add to --json) which heavy libraries (torch, sklearn, hydra, pandas, ...) were imported",
+    )
+    # Real-time options (slipkit.runtime.realtime; docs/deploy.md, Deadlines under load)
+    rt = p.add_argument_group("real-time options (docs/deploy.md, Deadlines under load)")
+    rt.add_argument(
+        "--cpus",
+        metavar="LIST",
+        help="pin the process to these cores (os.sched_setaffinity), e.g. 1 or 0,2-3",
+    )
+    rt.add_argument(
+        "--priority",
+        default="normal",
+        metavar="KIND[:N]",
+        help="normal (default), nice[:N] (os.nice, N in -20..19, default -10) or "
+        "fifo[:N] (SCHED_FIFO, N in 1..99, default 10); one line and normal "
+        "priority when not permitted",
+    )
+    rt.add_argument(
+        "--freeze-gc",
+        action="store_true",
+        help="collect, freeze and disable the garbage collector while the loop runs",
+    )
+    rt.add_argument(
+        "--pin-threads",
+        action="store_true",
+        help="onnxruntime with one intra-op and one inter-op thread (overrides the "
+        "manifest's session)",
+    )
+    rt.add_argument(
+        "--spin",
+        action=argparse.BooleanOptionalAction,
+        default=False,
+        help="with --pin-threads: session.intra_op.allow_spinning (default off)",
+    )
+    rt.add_argument(
+        "--realtime",
+        action="store_true",
+        help="shorthand for --priority fifo --freeze-gc --pin-threads (add --cpus)",
     )
     return p
 
@@ -431,9 +476,18 @@ def run(argv: Sequence[str] | None = None) -> int:
     _check_args(args)
     out: dict[str, Any]
     if args.stream:
-        out, status = run_hand_cli(args)
+        # affinity, priority and the GC apply to the whole hand (its bundles' sessions
+        # are the manifests')
+        rt_opts = _realtime_options(args)
+        for note in apply_realtime(rt_opts).notes:
+            print(f"slipkit-run: note: {note}", file=sys.stderr)
+        with frozen_gc(rt_opts.freeze_gc):
+            out, status = run_hand_cli(args)
         return _finish(args, out, status)
+    rt_opts = _realtime_options(args)
     bundle = load_bundle(args.bundle, deadline_s=args.load_deadline)
+    if rt_opts.pin_threads:
+        bundle = bundle.with_session(pinned_session(bundle.session_spec, rt_opts))
     if args.choose_session:
         frames, times, name = _replay(bundle, args.replay)
         n = len(frames) if args.frames is None else args.frames
@@ -487,7 +541,11 @@ def run(argv: Sequence[str] | None = None) -> int:
         hook = None if not sinks else sinks[0] if len(sinks) == 1 else Fanout(*sinks)
         try:
             loop = StreamLoop(bundle, io_binding=args.io_binding, on_decision=hook)
-            result, name, udp, replay_line = _run_source(args, bundle, loop)
+            rt_state = apply_realtime(rt_opts)
+            for note in rt_state.notes:
+                print(f"slipkit-run: note: {note}", file=sys.stderr)
+            with frozen_gc(rt_opts.freeze_gc):
+                result, name, udp, replay_line = _run_source(args, bundle, loop)
         finally:
             if udp_sink is not None:
                 udp_sink.close()
@@ -502,6 +560,12 @@ def run(argv: Sequence[str] | None = None) -> int:
             }
         out["io_binding"] = bool(args.io_binding)
         out["session"] = bundle.session_spec.to_json()
+        if rt_opts.any:
+            out["realtime"] = {
+                **rt_opts.to_json(),
+                "applied": rt_state.applied,
+                "notes": rt_state.notes,
+            }
         for line in _summary_lines(out, Path(name).name if udp is None else name):
             print(line)
         if udp is None and replay_line is not None:
@@ -547,6 +611,20 @@ def run(argv: Sequence[str] | None = None) -> int:
         if args.check:
             print(f"check: {'passed' if status == 0 else 'FAILED'}")
     return _finish(args, out, status)
+
+
+def _realtime_options(args: argparse.Namespace) -> RealtimeOptions:
+    """The real-time options of the command line (``--realtime`` fills the unset ones)."""
+    priority = args.priority
+    if args.realtime and priority == "normal":
+        priority = "fifo"
+    return options_from_text(
+        cpus=args.cpus,
+        priority=priority,
+        freeze_gc=args.freeze_gc or args.realtime,
+        pin_threads=args.pin_threads or args.realtime,
+        allow_spinning=args.spin,
+    )
 
 
 def _finish(args: argparse.Namespace, out: dict[str, Any], status: int) -> int:

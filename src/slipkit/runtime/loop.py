@@ -510,7 +510,7 @@ class StreamLoop:
             # argmax returns the first NaN when there is one: a finite top entry
             # means every entry is finite.
             cls = int(score.argmax())
-            top = float(score.flat[cls])
+            top = score.item(cls)
             if not math.isfinite(top):
                 self._skip_nonfinite()
                 return None
@@ -518,11 +518,12 @@ class StreamLoop:
             # The score: the largest slip-class entry (the top one when slip; the
             # fancy-indexed max costs ~1.5 us, so only when it is not).
             if self._one_slip_col:
-                s = float(score.flat[self._col])
+                s = score.item(self._col)
             else:
                 s = top if slip else float(score.flat[self._slip_cols].max())
         else:
-            s = float(score.flat[self._col])
+            # .item, not .flat[...]: a flatiter object is ~2.6 KB allocated per call
+            s = score.item(self._col)
             if not math.isfinite(s):
                 # NaN compares False with any threshold: scoring it would read as a
                 # silent "no slip". An overflow inside the graph is skipped instead.

@@ -1,0 +1,295 @@
+"""Real-time hygiene for the decision loop: CPU affinity, priority, a frozen GC, pinned threads.
+
+What a robotics engineer sets before a control loop shares a PC with other work
+(``docs/deploy.md``, *Deadlines under load*), each an option of ``slipkit-run`` and
+measured by ``benchmarks/bench_load.py``:
+
+``cpus``
+    :func:`os.sched_setaffinity` of the process (every thread, onnxruntime's
+    included) to these cores, so the scheduler does not migrate the loop between
+    cores (cold caches) and other processes can be kept off them.
+``priority``
+    ``"fifo"``: :func:`os.sched_setscheduler` ``SCHED_FIFO`` at ``rt_priority``
+    (1-99): the loop preempts every normal process on its cores. ``"nice"``:
+    :func:`os.nice` by ``nice`` (negative raises priority). Both need a permission
+    (``CAP_SYS_NICE``, or an ``rtprio`` / ``nice`` limit in
+    ``/etc/security/limits.conf``); without it the loop runs at its normal priority
+    and :func:`apply_realtime` returns one line saying so (never an exception).
+``freeze_gc``
+    :func:`gc.collect`, then :func:`gc.freeze` (every live object moved to a
+    permanent generation the collector never scans) and :func:`gc.disable` while
+    the loop runs (:func:`frozen_gc`): no collection pause lands in a decision. The
+    loop's hot path allocates no container objects per frame, so nothing piles up.
+``pin_threads``
+    onnxruntime with one intra-op and one inter-op thread and ``allow_spinning`` as
+    chosen (:func:`pinned_session`): no hand-off to a worker thread per node, and no
+    spinning worker competing with the loop for its core.
+
+Standard library only (the runtime imports numpy and onnxruntime besides).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import gc
+import os
+from collections.abc import Iterator
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+from slipkit.runtime.errors import OptionError
+from slipkit.runtime.session import SessionSpec
+
+#: ``priority`` choices.
+PRIORITIES = ("normal", "nice", "fifo")
+#: Default SCHED_FIFO priority (1..99; the kernel's own threads sit at 50 and above).
+DEFAULT_RT_PRIORITY = 10
+#: Default nice increment of ``priority="nice"`` (-20..19; negative = higher priority).
+DEFAULT_NICE = -10
+
+
+@dataclass(frozen=True)
+class RealtimeOptions:
+    """The real-time options of a run (module docstring).
+
+    Parameters
+    ----------
+    cpus : tuple of int, optional
+        Cores to pin the process to; None leaves the affinity alone.
+    priority : {"normal", "nice", "fifo"}
+        Scheduling priority to ask for.
+    rt_priority : int
+        SCHED_FIFO priority (1..99) for ``priority="fifo"``.
+    nice : int
+        Nice increment (-20..19) for ``priority="nice"``.
+    freeze_gc : bool
+        Freeze and disable the garbage collector while the loop runs.
+    pin_threads : bool
+        One intra-op and one inter-op onnxruntime thread.
+    allow_spinning : bool
+        onnxruntime's ``session.intra_op.allow_spinning`` with ``pin_threads``.
+    """
+
+    cpus: tuple[int, ...] | None = None
+    priority: str = "normal"
+    rt_priority: int = DEFAULT_RT_PRIORITY
+    nice: int = DEFAULT_NICE
+    freeze_gc: bool = False
+    pin_threads: bool = False
+    allow_spinning: bool = False
+
+    def __post_init__(self) -> None:
+        if self.priority not in PRIORITIES:
+            raise OptionError(
+                "--priority",
+                f"must be one of {', '.join(PRIORITIES)}; got {self.priority!r}",
+            )
+        if not 1 <= self.rt_priority <= 99:
+            raise OptionError(
+                "--priority",
+                f"SCHED_FIFO priority must be in [1, 99]; got {self.rt_priority}",
+            )
+        if not -20 <= self.nice <= 19:
+            raise OptionError(
+                "--priority", f"nice increment must be in [-20, 19]; got {self.nice}"
+            )
+        if self.cpus is not None and (not self.cpus or any(c < 0 for c in self.cpus)):
+            raise OptionError(
+                "--cpus", f"must list one or more core numbers >= 0; got {self.cpus}"
+            )
+
+    @property
+    def any(self) -> bool:
+        """Whether any option asks for a change."""
+        return (
+            self.cpus is not None
+            or self.priority != "normal"
+            or self.freeze_gc
+            or self.pin_threads
+        )
+
+    def to_json(self) -> dict[str, Any]:
+        """The options as a JSON-ready dict."""
+        return {
+            "cpus": None if self.cpus is None else list(self.cpus),
+            "priority": self.priority,
+            "rt_priority": self.rt_priority,
+            "nice": self.nice,
+            "freeze_gc": self.freeze_gc,
+            "pin_threads": self.pin_threads,
+            "allow_spinning": self.allow_spinning,
+        }
+
+
+def parse_cpus(text: str) -> tuple[int, ...]:
+    """``"0,2-3"`` -> ``(0, 2, 3)``; :class:`OptionError` naming ``--cpus`` otherwise."""
+    out: set[int] = set()
+    try:
+        for part in text.split(","):
+            lo, _, hi = part.strip().partition("-")
+            a = int(lo)
+            b = int(hi) if hi else a
+            if a < 0 or b < a:
+                raise ValueError
+            out.update(range(a, b + 1))
+    except ValueError:
+        raise OptionError(
+            "--cpus", f"must be core numbers and ranges such as 0,2-3; got {text!r}"
+        ) from None
+    return tuple(sorted(out))
+
+
+def parse_priority(text: str) -> tuple[str, int | None]:
+    """``"fifo"``, ``"fifo:20"``, ``"nice"``, ``"nice:-5"``, ``"normal"`` -> (kind, value)."""
+    kind, _, value = text.partition(":")
+    if kind not in PRIORITIES or (kind == "normal" and value):
+        raise OptionError(
+            "--priority",
+            f"must be normal, nice[:N] (-20..19) or fifo[:N] (1..99); got {text!r}",
+        )
+    if not value:
+        return kind, None
+    try:
+        return kind, int(value)
+    except ValueError:
+        raise OptionError(
+            "--priority", f"{kind}'s value must be a whole number; got {value!r}"
+        ) from None
+
+
+def options_from_text(
+    *,
+    cpus: str | None = None,
+    priority: str = "normal",
+    freeze_gc: bool = False,
+    pin_threads: bool = False,
+    allow_spinning: bool = False,
+) -> RealtimeOptions:
+    """:class:`RealtimeOptions` from the command-line texts (checked, errors name the option)."""
+    kind, value = parse_priority(priority)
+    kw: dict[str, Any] = {}
+    if value is not None:
+        kw["rt_priority" if kind == "fifo" else "nice"] = value
+    return RealtimeOptions(
+        cpus=None if cpus is None else parse_cpus(cpus),
+        priority=kind,
+        freeze_gc=freeze_gc,
+        pin_threads=pin_threads,
+        allow_spinning=allow_spinning,
+        **kw,
+    )
+
+
+@dataclass
+class RealtimeState:
+    """What :func:`apply_realtime` did: applied settings and one-line notes."""
+
+    applied: dict[str, Any] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+
+def _not_permitted(what: str, exc: OSError) -> str:
+    why = exc.strerror or type(exc).__name__
+    return (
+        f"{what} not permitted ({why}; needs CAP_SYS_NICE or an rtprio/nice limit, "
+        "docs/deploy.md): running at normal priority"
+    )
+
+
+def apply_realtime(opts: RealtimeOptions, pid: int = 0) -> RealtimeState:
+    """Apply affinity and priority to process ``pid`` (0: this one); never raises on EPERM.
+
+    A setting the OS refuses (no permission, a core that does not exist, a platform
+    without the call) is skipped and named in one line of ``notes``; ``applied``
+    holds what took effect. GC and threads are applied by :func:`frozen_gc` and
+    :func:`pinned_session`.
+    """
+    state = RealtimeState()
+    if opts.cpus is not None:
+        if not hasattr(os, "sched_setaffinity"):
+            state.notes.append("--cpus: CPU affinity is not available on this platform")
+        else:
+            try:
+                os.sched_setaffinity(pid, opts.cpus)
+                state.applied["cpus"] = sorted(os.sched_getaffinity(pid))
+            except OSError as exc:
+                state.notes.append(
+                    f"--cpus {','.join(map(str, opts.cpus))}: not applied "
+                    f"({exc.strerror or exc}; cores available: "
+                    f"{','.join(map(str, sorted(os.sched_getaffinity(pid))))})"
+                )
+    if opts.priority == "fifo":
+        if not hasattr(os, "sched_setscheduler"):
+            state.notes.append(
+                "--priority fifo: SCHED_FIFO is not available on this platform"
+            )
+        else:
+            try:
+                os.sched_setscheduler(
+                    pid, os.SCHED_FIFO, os.sched_param(opts.rt_priority)
+                )
+                state.applied["priority"] = f"fifo:{opts.rt_priority}"
+            except OSError as exc:
+                state.notes.append(
+                    _not_permitted(f"--priority fifo:{opts.rt_priority}", exc)
+                )
+    elif opts.priority == "nice":
+        try:
+            if pid == 0:
+                new = os.nice(opts.nice)
+            else:
+                new = os.getpriority(os.PRIO_PROCESS, pid) + opts.nice
+                os.setpriority(os.PRIO_PROCESS, pid, new)
+            state.applied["priority"] = f"nice:{new}"
+        except OSError as exc:
+            state.notes.append(_not_permitted(f"--priority nice:{opts.nice}", exc))
+    return state
+
+
+@contextlib.contextmanager
+def frozen_gc(enabled: bool = True) -> Iterator[None]:
+    """Collect, freeze and disable the garbage collector for the block (restored after).
+
+    ``enabled=False`` is a no-op, so callers need no branch.
+    """
+    if not enabled:
+        yield
+        return
+    was_enabled = gc.isenabled()
+    gc.collect()
+    gc.freeze()
+    gc.disable()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
+        if was_enabled:
+            gc.enable()
+
+
+def pinned_session(spec: SessionSpec, opts: RealtimeOptions) -> SessionSpec:
+    """``spec`` with one intra-op and one inter-op thread (and the spinning choice) when
+    ``opts.pin_threads``; ``spec`` unchanged otherwise."""
+    if not opts.pin_threads:
+        return spec
+    return replace(
+        spec,
+        intra_op_num_threads=1,
+        inter_op_num_threads=1,
+        allow_spinning=bool(opts.allow_spinning),
+    )
+
+
+__all__ = [
+    "DEFAULT_NICE",
+    "DEFAULT_RT_PRIORITY",
+    "PRIORITIES",
+    "RealtimeOptions",
+    "RealtimeState",
+    "apply_realtime",
+    "frozen_gc",
+    "options_from_text",
+    "parse_cpus",
+    "parse_priority",
+    "pinned_session",
+]
