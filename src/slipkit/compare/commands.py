@@ -503,6 +503,11 @@ def run_comparison(
     limits = verdict_limits(comp.get("verdict"), "comparison.verdict")
     analytic = [str(a) for a in comp.get("analytic") or []]
     cost_cfg = _container(cfg.get("cost") or OmegaConf.create({}))
+    # cost.max_frames is the timed decisions per estimator over all seeds: each seed
+    # times its share, so seeds add spread, not timing cost
+    cost_cfg["max_frames"] = max(
+        1, math.ceil(int(cost_cfg.get("max_frames", 2000)) / len(seeds))
+    )
     keep = bool(cost_cfg.get("keep_bundles", False))
     per_seed: list[pd.DataFrame] = []
     evals: dict[str, Evaluation] = {}
