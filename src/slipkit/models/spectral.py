@@ -20,7 +20,8 @@ reads the physics of its estimator for its diagnostics (the pull's ``f_d``, eq. 
 frequency at the true speed, the stick length): those come from the internal analytic
 estimator ``physics_`` fitted on the same trials (its ``mu_s`` / ``mu_k`` set by the
 task per material), so the task's frequency columns are the analytic ones and only the
-speed is learned. No ONNX exporter (the compare report says "not exportable").
+speed is learned. Exported by :mod:`slipkit.export.spectral` (the features as ONNX ops,
+the regressor through skl2onnx).
 """
 
 from __future__ import annotations
