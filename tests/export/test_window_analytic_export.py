@@ -123,6 +123,16 @@ def test_twist_graph_names_rotational_second() -> None:
     assert clf.predict(Xh).tolist() == decided.tolist()
 
 
+def test_importing_slipkit_export_registers_both_rules() -> None:
+    """slipkit.export's import registers the energy and twist exporters (the compare path)."""
+    from slipkit.export.registry import exporter_for
+
+    assert (export_electrode_energy, export_slip_twist) == (
+        exporter_for(ElectrodeEnergyClassifier),
+        exporter_for(SlipTwistClassifier),
+    )
+
+
 def test_window_length_is_required_and_checked() -> None:
     """Without n_frames, or with a length the rule cannot score, export is refused by name."""
     X, y = energy_windows()
