@@ -4,7 +4,8 @@ Stages, each with a progress bar and its wall time printed at the end:
 
 1. **simulate** the scenes the comparisons use (each comparison's own size; one dataset
    per seed, scene seed ``dataset.seed + seed``) into ``<out>/data/<scene>-n<N>-s<seed>``;
-2. **import** the public recordings when they are present (``<out>/data/<source>``);
+2. **import** the public recordings a comparison reads, when they are present
+   (``<out>/data/<source>``; ``import_all=true``: every one present);
 3. **train + calibrate + compare** per sensor family (``configs/comparison``) over the
    demo's ``seeds``: the learned models are trained and the analytic baselines calibrated
    on the same split, exported and timed
@@ -259,8 +260,19 @@ def demo_main(cfg: DictConfig) -> Path:
             "stage and the real-data comparison"
         )
     imported: dict[str, Path] = {}
+    # only the recordings a planned comparison reads (import_all=true: every one present)
+    used = {
+        str(src)
+        for fam, src in (cfg.get("real_comparisons") or {}).items()
+        if str(fam) in plan
+    }
+    to_import = {
+        src: path
+        for src, path in present.items()
+        if bool(cfg.get("import_all", False)) or src in used
+    }
     for source, src_path in tqdm(
-        list(present.items()), desc="2/7 import", unit="source", disable=not show
+        list(to_import.items()), desc="2/7 import", unit="source", disable=not show
     ):
         t0 = time.perf_counter()
         reader = instantiate(
