@@ -10,6 +10,7 @@ import pytest
 from scipy import stats
 
 from slipkit.compare.aggregate import aggregate
+from slipkit.compare.report import cell
 from slipkit.compare.table import block_p99, choose_deploy, seed_table
 from slipkit.errors import SlipkitError
 
@@ -173,3 +174,14 @@ def test_seed_table_export_fails_if_any_seed_failed() -> None:
     )
     df = seed_table(rows, {"b": np.full(10, 20.0)}, "balanced_accuracy")
     assert ["not exportable: x", "ok"] == df["export"].tolist()
+
+
+def test_report_cells_show_the_spread_of_scores_not_of_latencies() -> None:
+    """A seeded table prints accuracy as mean ± std; the pooled p99 and the budget bare."""
+    lat = {"a": np.full(100, 40.0), "b": np.full(100, 20.0)}
+    row = seed_table(_seed_rows(), lat, "balanced_accuracy").iloc[0]
+    assert ("0.850 ± 0.050", "40.0", "50") == (
+        cell(row, "balanced_accuracy", "{:.3f}"),
+        cell(row, "p99_us", "{:.1f}"),
+        cell(row, "budget_p99_us", "{:.4g}"),
+    )

@@ -105,9 +105,13 @@ def markdown_table(df: pd.DataFrame, spec: Sequence[tuple[str, str, str]]) -> st
     return "\n".join(lines)
 
 
-#: columns fixed by the config or the data layout: a spread over seeds says nothing there
+#: columns fixed by the config or the data layout (a spread over seeds says nothing there),
+#: and the latencies: with several seeds they are percentiles of all seeds' decisions
+#: pooled, not means over seeds (each seed's are in seeds.csv)
 NO_SPREAD = frozenset(
     {
+        "p50_us",
+        "p99_us",
         "budget_p99_us",
         "frame_period_us",
         "fit_calls",
