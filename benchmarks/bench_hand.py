@@ -13,9 +13,11 @@ comes due while another stream's model runs waits, and that wait is in its laten
 * palm: FSR (2 kHz), the touch-and-slip detector;
 * ring: TacTip pins (120 Hz), the RBF SVM with the pin features in the graph.
 
-Each round runs every bundle alone, then all five in one process in ``loop`` mode (one
-thread, round-robin) and in ``threads`` mode (one thread per stream), each for
-``--seconds`` of sensor time, in that order; the table gives, per stream, the median
+Each round runs every bundle alone (paced, then unpaced), then the five together in one
+process: paced in ``loop`` mode (one thread, round-robin), paced in ``threads`` mode (one
+thread per stream), unpaced in ``loop`` mode, and paced in ``loop`` mode with
+``--realtime``'s priority and GC (SCHED_FIFO priority 10 when permitted, the garbage
+collector frozen; restored after), each run ``--seconds`` of sensor time; the table gives, per stream, the median
 over rounds of each run's p50 / p99 (us), the decisions over the stream's own p99
 budget (summed over rounds, out of all decisions) and the ratio hand p99 / alone p99;
 for the runs alone, also the time of ``StreamLoop.step`` itself on a deciding frame
@@ -204,6 +206,29 @@ def run_once(
     return out
 
 
+def run_realtime(
+    bundles: dict[str, Path], names: list[str], seconds: float
+) -> tuple[dict[str, Any], list[str]]:
+    """The hand in ``loop`` mode, paced, with ``slipkit-run --realtime``'s priority and GC.
+
+    SCHED_FIFO (priority 10) on this thread and the garbage collector frozen, both
+    restored after (:mod:`slipkit.runtime.realtime`); no ``--cpus`` (the benchmark does
+    not take a core from the other jobs). Returns the run and the notes of what the OS
+    refused.
+    """
+    from slipkit.runtime.realtime import RealtimeOptions, apply_realtime, frozen_gc
+
+    before = os.sched_getscheduler(0), os.sched_getparam(0)
+    state = apply_realtime(RealtimeOptions(priority="fifo", rt_priority=10))
+    try:
+        with frozen_gc(True):
+            out = run_once(bundles, names, "loop", seconds)
+    finally:
+        if state.applied:
+            os.sched_setscheduler(0, before[0], before[1])
+    return out, list(state.notes)
+
+
 def _pct_us(lat_ns: np.ndarray) -> tuple[float, float]:
     if len(lat_ns) == 0:
         return float("nan"), float("nan")
@@ -301,7 +326,8 @@ def main() -> None:
         return
     # Paced (the sensors' rates): alone, the hand in one loop, the hand in threads;
     # unpaced (as fast as taken): alone and the hand in one loop (compute only).
-    configs = ["alone", "loop", "threads", "alone_fast", "loop_fast"]
+    configs = ["alone", "loop", "threads", "loop_rt", "alone_fast", "loop_fast"]
+    rt_notes: list[str] = []
     # name -> config -> list of (p50, p99, over, decisions) per round
     acc: dict[str, dict[str, list[tuple[float, float, int, int]]]] = {
         n: {c: [] for c in configs} for n in names
@@ -332,6 +358,9 @@ def main() -> None:
             used = runs[c].pop("_cpu")
             if c in cpu:
                 cpu[c].append(used)
+        runs["loop_rt"], notes = run_realtime(bundles, names, args.seconds)
+        runs["loop_rt"].pop("_cpu")
+        rt_notes = notes or rt_notes
         for c in configs:
             for name, r in runs[c].items():
                 lat = r["lat_ns"]
@@ -357,6 +386,7 @@ def main() -> None:
     )
     print("|" + "---|" * 10)
     med: dict[str, dict[str, tuple[float, float, int, int]]] = {}
+    rt_rows = []
     for name in names:
         med[name] = {
             c: (
@@ -378,12 +408,31 @@ def main() -> None:
             f"{'yes' if lo[1] <= budget_us else 'no'} / "
             f"{'yes' if th[1] <= budget_us else 'no'} |"
         )
+        rt = med[name]["loop_rt"]
+        rt_rows.append(
+            f"| {name} | {budget_us:.0f} | {a[0]:.1f} / {a[1]:.1f} | "
+            f"{rt[0]:.1f} / {rt[1]:.1f} | {rt[1] / a[1]:.2f}x | {rt[2]} (of {rt[3]}) | "
+            f"{'yes' if rt[1] <= budget_us else 'no'} |"
+        )
     print()
     print(
         "CPU time / wall time of the paced runs (1.0 = one core): five bundles alone "
         f"(summed) {np.median(cpu['alone']):.2f}, hand (loop) "
         f"{np.median(cpu['loop']):.2f}, hand (threads) {np.median(cpu['threads']):.2f}"
     )
+    print()
+    print(
+        "Paced, the hand in loop mode with the real-time options (SCHED_FIFO 10, GC "
+        "frozen)" + (f"; NOT APPLIED: {'; '.join(rt_notes)}" if rt_notes else "") + ":"
+    )
+    print()
+    print(
+        "| stream | budget p99 | alone (normal) p50 / p99 | hand, real-time p50 / p99 "
+        "| hand real-time / alone p99 | over budget | met |"
+    )
+    print("|" + "---|" * 7)
+    for row in rt_rows:
+        print(row)
     print()
     print("Unpaced (frames as fast as the loop takes them: compute per frame only):")
     print()
