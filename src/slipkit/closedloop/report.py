@@ -15,11 +15,13 @@ from omegaconf import DictConfig, OmegaConf
 OUTCOMES = {
     "caught_pct": "objects caught (not dropped), % of trials",
     "dropped_pct": "objects dropped, % of trials",
-    "slip_mm": "slip distance at arrest, mm (caught objects whose slip was detected at or after its onset)",
+    "slip_mm": "slip distance at arrest, mm (caught objects whose slip was detected at or after its onset; "
+    "FSR, BioTac: all slides of the trial)",
     "onset_to_arrest_ms": "slip onset to arrest, ms (the same objects)",
     "delay_ms": "detection delay in the loop, ms (declared at or after the onset)",
-    "false_alarm_pct": "declared before the object slipped, % of trials",
-    "extra_force_N": "peak grip force above the open-loop retraction's after a false alarm, N (mean over trials)",
+    "false_alarm_pct": "declared while the object was not slipping (TacTip: before it slipped), % of trials",
+    "extra_force_N": "peak grip force a false alarm added (TacTip: above the open-loop retraction's; "
+    "FSR, BioTac: above the same controller told only the true declarations), N (mean over trials)",
     "extra_impulse_Ns": "integral of that extra force, N s (mean over trials)",
 }
 
@@ -285,7 +287,10 @@ def write_report(
         "",
         f"## Per {label.split(' (')[0]} (all seeds pooled)",
         "",
-        speeds.to_markdown(index=False, floatfmt=".1f"),
+        # The condition column as given (0.02 s must not print as 0.0), the rest to 0.1.
+        speeds.to_markdown(
+            index=False, floatfmt=["g"] + [".1f"] * (len(speeds.columns) - 1)
+        ),
         "",
         "## Columns",
         "",
