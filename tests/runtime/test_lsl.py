@@ -370,3 +370,25 @@ def test_real_lsl_decision_outlet_reaches_an_inlet(
     inlet.close_stream()
     assert r.frame.tolist() == [int(s[1]) for s in got]
     np.testing.assert_allclose(r.score, [s[3] for s in got])
+
+
+def test_a_hands_decision_outlet_tags_each_stream(
+    case: LinearCase, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """slipkit-run --stream ... --lsl-out pushes each stream's decisions with its index."""
+    fake = FakePylsl()
+    monkeypatch.setitem(sys.modules, "pylsl", fake)
+    status = run(
+        [
+            "--stream",
+            f"a={case.path}",
+            "--stream",
+            f"b={case.path}",
+            "--frames",
+            "20",
+            "--lsl-out",
+            "hand",
+        ]
+    )
+    index = [int(x[0]) for x, _ in fake.outlets["hand"].pushed]
+    assert (0, 17, 17) == (status, index.count(0), index.count(1))
