@@ -1055,9 +1055,8 @@ def _deploy_davis(
     """
     from slipkit.baselines.davis import DavisPolarity
     from slipkit.export.davis import DavisAreaRule
-    from slipkit.train.tasks.davis import DavisRelease
-
     from slipkit.models.events import EventFrameClassifier
+    from slipkit.train.tasks.davis import DavisRelease
 
     assert isinstance(task, DavisRelease)
     det = run.model
