@@ -187,6 +187,7 @@ def demo_main(cfg: DictConfig) -> Path:
 
     start = time.perf_counter()
     stage_s: dict[str, float] = {}
+    seeds = demo_seeds(cfg)  # a bad seed list is refused before anything is written
     out = Path(str(cfg.out))
     show = bool(cfg.get("progress", True))
     root = Path(str(cfg.data_root))
@@ -203,7 +204,6 @@ def demo_main(cfg: DictConfig) -> Path:
         overwrite=bool(cfg.overwrite),
     )
     out.mkdir(parents=True, exist_ok=True)
-    seeds = demo_seeds(cfg)
     plan = _plan(cfg, present)
     datasets: list[dict[str, Any]] = []
 
