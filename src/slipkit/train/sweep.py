@@ -14,24 +14,46 @@ them, prints the best run and its parameters, and writes ``sweep.json`` (every j
 best first) and ``best.json`` into the sweep folder. The objective is the task's
 validation score (group CV on the training side), so the choice never looks at the
 test data; the test scores of the best run are printed beside it for reading only.
+
+A multirun over replicates (seeds, objects, folds: the ``replicates`` of the callback,
+``seed`` and ``dataset.seed`` by default) is also folded into one table,
+``aggregate.csv`` in the sweep folder (:func:`aggregate_sweep`): one row per estimator
+and setting of the other swept parameters, with the number of runs and the mean, std
+and Student-t confidence interval of the objective and of every numeric validation and
+test metric (:func:`slipkit.compare.aggregate.aggregate`). The best run is still chosen
+on the validation objective alone.
+
+Any Hydra launcher runs the jobs: the basic one in sequence, ``hydra/launcher=joblib``
+in parallel on one machine, ``hydra/launcher=submitit_slurm`` on a SLURM cluster
+(docs/scale.md). Each job writes only its own run folder (atomically, named with its job
+number) and its own job folder; the summary is written once, by the launching process.
 """
 
 from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+import pandas as pd
 from hydra.core.hydra_config import HydraConfig
 from hydra.experimental.callback import Callback
-from omegaconf import DictConfig
+from omegaconf import DictConfig, ListConfig
 
 from slipkit._files import atomic_write_text
 
 log = logging.getLogger("slipkit.sweep")
 
 JOB_FILE = "job.json"
+AGGREGATE_FILE = "aggregate.csv"
+#: Swept keys whose values are repetitions of one setting, not settings to compare.
+REPLICATES = ("seed", "dataset.seed")
+#: The metrics.json sections whose numeric leaves the aggregate table carries.
+METRIC_SECTIONS = ("validation", "test")
+#: Leaves that count things rather than score them (sample sizes, CV folds).
+_BOOKKEEPING = frozenset({"n", "k", "debounce_k", "n_trials"})
 
 
 def record_job(run_dir: Path, objective: dict[str, Any]) -> Path | None:
@@ -124,8 +146,130 @@ def best_lines(best: dict[str, Any], n_jobs: int | None = None) -> list[str]:
     return lines
 
 
+def _numeric_leaves(node: Any, prefix: str) -> dict[str, float]:
+    """Every int / float leaf of a nested dict as ``{dotted.key: value}`` (None -> NaN)."""
+    out: dict[str, float] = {}
+    if isinstance(node, dict):
+        for key, value in node.items():
+            if key not in _BOOKKEEPING:
+                out.update(_numeric_leaves(value, f"{prefix}.{key}"))
+    elif node is None:
+        out[prefix] = float("nan")
+    elif isinstance(node, int | float) and not isinstance(node, bool):
+        out[prefix] = float(node)
+    return out
+
+
+def _run_estimator(run_dir: Path) -> str:
+    """The run's estimator class (``run.json`` 'model'), short name; '?' if unreadable."""
+    try:
+        run = json.loads((run_dir / "run.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return "?"
+    return str(run.get("model", "?")).rsplit(".", 1)[-1]
+
+
+def aggregate_sweep(
+    sweep_dir: Path, replicates: Sequence[str] = REPLICATES
+) -> pd.DataFrame | None:
+    """Fold a multirun's jobs into one table: per estimator and setting, mean / std / CI.
+
+    Parameters
+    ----------
+    sweep_dir : Path
+        The sweep folder holding ``<job>/job.json`` (written by :func:`record_job`).
+    replicates : sequence of str
+        Swept keys that repeat one setting (seeds, objects, folds); the other keys
+        that vary between jobs define the groups, beside the estimator.
+
+    Returns
+    -------
+    pandas.DataFrame or None
+        One row per group: ``estimator``, the other swept keys, ``n`` (runs), then
+        ``<metric>_mean`` / ``_std`` / ``_ci`` (95 % Student-t half-width, NaN for one
+        run) for the objective (``objective``) and every numeric leaf of the runs'
+        ``validation`` and ``test`` metrics but counts (``n``, ``k`` ...), in their
+        units. Written to
+        ``aggregate.csv`` atomically. None when no job recorded itself.
+    """
+    from slipkit.compare.aggregate import aggregate  # pandas / scipy: train extra
+
+    jobs = [
+        json.loads(p.read_text(encoding="utf-8"))
+        for p in sorted(sweep_dir.glob(f"*/{JOB_FILE}"))
+    ]
+    if not jobs:
+        return None
+    jobs.sort(key=lambda j: int(j["job"]))
+    values: dict[str, set[str]] = {}
+    for job in jobs:
+        for item in job["overrides"]:
+            key, _, value = item.partition("=")
+            values.setdefault(key.lstrip("+~"), set()).add(value)
+    swept = [k for k, v in values.items() if len(v) > 1]
+    groups = [k for k in swept if k not in set(replicates)]
+    rows = []
+    for job in jobs:
+        run = Path(job["run_dir"])
+        params = _sweep_params(job["overrides"], set(groups))
+        row: dict[str, Any] = {"estimator": _run_estimator(run)}
+        row.update({k: params.get(k, "") for k in groups})
+        row["objective"] = float(job["objective"]["value"])
+        try:
+            metrics = json.loads((run / "metrics.json").read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            metrics = {}
+        for section in METRIC_SECTIONS:
+            row.update(_numeric_leaves(metrics.get(section), section))
+        rows.append(row)
+    by = ["estimator", *groups]
+    df = pd.DataFrame(rows)
+    metric_cols = [c for c in df.columns if c not in by]
+    df[metric_cols] = df[metric_cols].apply(pd.to_numeric, errors="coerce")
+    table = aggregate(df, by=by, metrics=metric_cols)
+    atomic_write_text(sweep_dir / AGGREGATE_FILE, table.to_csv(index=False))
+    return table
+
+
+def aggregate_lines(table: pd.DataFrame, objective: str) -> list[str]:
+    """The aggregate table as printed: per group, n and the objective and test scores
+    as ``mean ± CI`` (the whole table is in ``aggregate.csv``)."""
+    group_cols = list(table.columns[: list(table.columns).index("n")])
+    shown = ["objective"] + [
+        c[: -len("_mean")]
+        for c in table.columns
+        if c.startswith("test.") and c.endswith("_mean")
+    ]
+    shown = [m for m in shown if table[f"{m}_mean"].notna().any()][:6]
+    lines = [
+        f"aggregate over replicates (mean ± 95 % CI; objective = {objective}):",
+    ]
+    for _, row in table.iterrows():
+        head = ", ".join(f"{c}={row[c]}" for c in group_cols)
+        cells = []
+        for m in shown:
+            mean, ci = row[f"{m}_mean"], row[f"{m}_ci"]
+            ci_txt = "" if pd.isna(ci) else f" ± {ci:.3g}"
+            cells.append(f"{m} {mean:.4g}{ci_txt}")
+        lines.append(f"  {head} (n={int(row['n'])}): " + "; ".join(cells))
+    return lines
+
+
 class SweepSummary(Callback):
-    """Hydra callback: at the end of a multirun, print and save the best run."""
+    """Hydra callback: at the end of a multirun, print and save the best run and the
+    aggregate table.
+
+    Parameters
+    ----------
+    replicates : sequence of str
+        Swept keys whose values repeat one setting (see :func:`aggregate_sweep`);
+        set with ``hydra.callbacks.sweep_summary.replicates=[seed,task.test_object]``.
+    """
+
+    def __init__(self, replicates: Sequence[str] | None = None) -> None:
+        if isinstance(replicates, ListConfig):
+            replicates = [str(r) for r in replicates]
+        self.replicates = tuple(REPLICATES if replicates is None else replicates)
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         sweep_dir = Path(str(config.hydra.sweep.dir))
@@ -137,7 +281,22 @@ class SweepSummary(Callback):
         n_jobs = len(list(sweep_dir.glob(f"*/{JOB_FILE}")))
         for line in best_lines(best, n_jobs):
             print(line)
+        table = aggregate_sweep(sweep_dir, self.replicates)
+        if table is not None:
+            for line in aggregate_lines(table, best["objective"]["name"]):
+                print(line)
+            print(sweep_dir / AGGREGATE_FILE)
         print(sweep_dir / "best.json")
 
 
-__all__ = ["JOB_FILE", "SweepSummary", "best_lines", "record_job", "summarise_sweep"]
+__all__ = [
+    "AGGREGATE_FILE",
+    "JOB_FILE",
+    "REPLICATES",
+    "SweepSummary",
+    "aggregate_lines",
+    "aggregate_sweep",
+    "best_lines",
+    "record_job",
+    "summarise_sweep",
+]
