@@ -298,6 +298,15 @@ def _real_pylsl() -> Any:
     return pylsl
 
 
+def _resolves(pylsl: Any, name: str) -> None:
+    """Skip (with the reason) when this machine's network cannot discover a local outlet."""
+    if not pylsl.resolve_byprop("name", name, 1, 5.0):
+        pytest.skip(
+            "LSL discovery found no local outlet within 5 s (no multicast on this "
+            "machine's interfaces?)"
+        )
+
+
 def _unique(tmp_path: Path, what: str) -> str:
     # Other test runs on this machine may publish LSL streams at the same time.
     return f"slipkit-test-{what}-{os.getpid()}-{tmp_path.name}"
@@ -309,6 +318,7 @@ def test_real_lsl_outlet_to_slipkit_run(case: LinearCase, tmp_path: Path) -> Non
     name = _unique(tmp_path, "in")
     info = pylsl.StreamInfo(name, "Tactile", 3, 100.0, pylsl.cf_float32, name)
     outlet = pylsl.StreamOutlet(info)
+    _resolves(pylsl, name)
 
     def send() -> None:
         if not outlet.wait_for_consumers(10.0):
@@ -353,6 +363,7 @@ def test_real_lsl_decision_outlet_reaches_an_inlet(
     pylsl = _real_pylsl()
     name = _unique(tmp_path, "out")
     outlet = LslOutlet(name, ["a"])
+    _resolves(pylsl, name)
     found = pylsl.resolve_byprop("name", name, 1, 10.0)
     inlet = pylsl.StreamInlet(found[0])
     inlet.open_stream(10.0)
