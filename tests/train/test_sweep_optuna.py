@@ -161,6 +161,23 @@ def test_a_trial_without_heartbeat_is_failed_after_the_grace_period(
     assert 2 == len(_complete(trials))
 
 
+def test_a_worker_of_another_sweep_is_refused(tmp_path: Path) -> None:
+    """A worker whose train overrides differ from the study's is refused in one line."""
+    import optuna
+
+    out = tmp_path / "sweep"
+    out.mkdir()
+    study = optuna.create_study(
+        study_name=STUDY, storage=f"sqlite:///{out}/study.db", direction="maximize"
+    )
+    study.set_user_attr("slipkit_sweep", {"train_overrides": ["experiment=other"]})
+    done = subprocess.run(_worker(out, 1), capture_output=True, text=True, check=False)
+    assert 2 == done.returncode
+    assert 1 == len(done.stderr.splitlines()), done.stderr
+    assert "was started with train_overrides=['experiment=other']" in done.stderr
+    assert [] == study.get_trials()
+
+
 def test_search_space_is_read_from_config() -> None:
     """configs/search/tactip_svm.yaml, with a command-line change, becomes the study's space."""
     from hydra import compose, initialize_config_dir

@@ -399,7 +399,10 @@ def open_storage(url: str, *, heartbeat_s: int, grace_s: int, max_retry: int) ->
     # SQLite locks the whole file per write: wait for the other workers (s) rather
     # than fail with "database is locked".
     engine = {"connect_args": {"timeout": 60}} if url.startswith("sqlite") else None
-    callback: dict[str, Any] = {callback_key: callback_cls(max_retry=int(max_retry))}
+    with warnings.catch_warnings():  # experimental since 2.8, still in 5.0
+        warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+        retry = callback_cls(max_retry=int(max_retry))
+    callback: dict[str, Any] = {callback_key: retry}
     try:
         for attempt in range(_OPEN_ATTEMPTS):
             try:
@@ -429,7 +432,15 @@ def open_storage(url: str, *, heartbeat_s: int, grace_s: int, max_retry: int) ->
         ) from None
     except (SQLAlchemyError, ImportError, OSError) as exc:
         first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise SlipkitError(f"storage={shown_url(url)}: cannot open: {first}") from None
+        hint = (
+            " (postgresql:// needs `pip install 'psycopg[binary]'`; "
+            "postgresql+psycopg2:// psycopg2, mysql+pymysql:// PyMySQL)"
+            if isinstance(exc, ImportError)
+            else ""
+        )
+        raise SlipkitError(
+            f"storage={shown_url(url)}: cannot open: {first}{hint}"
+        ) from None
 
 
 class _NotRun(Exception):
@@ -492,7 +503,7 @@ def _study_identity(
     from optuna.distributions import distribution_to_json
 
     return {
-        "train_overrides": list(overrides),
+        "train_overrides": sorted(overrides),  # the same set in any order
         "space": {k: json.loads(distribution_to_json(d)) for k, d in space.items()},
         "objective": obj.name,
         "direction": obj.direction,
@@ -659,7 +670,15 @@ def sweep_main(
             time.sleep(poll_s)
             continue
         waiting_said = False
-        study.optimize(objective, n_trials=1, catch=(_NotRun,), gc_after_trial=False)
+        try:
+            study.optimize(
+                objective, n_trials=1, catch=(_NotRun,), gc_after_trial=False
+            )
+        except optuna.exceptions.UpdateFinishedTrialError as exc:
+            # Another worker took this live trial for dead (no heartbeat for grace_s:
+            # a stalled machine or network) and queued its parameters again; the
+            # retry counts, this result stays in its run folder only.
+            log.warning("a trial was failed by another worker meanwhile: %s", exc)
 
     for line in best_lines(study, obj, url):
         print(line)
