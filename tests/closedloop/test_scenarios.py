@@ -53,3 +53,30 @@ def test_unknown_or_bad_family_is_refused(family: str, message: str) -> None:
     """A family with no module, or a name that is no identifier, is a SlipkitError naming it."""
     with pytest.raises(SlipkitError, match=message):
         get_scenario(family)
+
+
+def test_demo_block_keeps_its_detectors_and_sizes() -> None:
+    """demo=true keeps the demo: block's detectors, trials and delays; an unknown detector is refused."""
+    from omegaconf import OmegaConf
+
+    from slipkit.closedloop.commands import apply_demo
+
+    scen = OmegaConf.create(
+        {
+            "trials_per_speed": 4,
+            "train_trials": 16,
+            "detectors": {"a": {"run": "r", "debounce_k": 1}, "b": {"run": "s"}},
+            "oracle_delays_ms": [10, 25],
+            "demo": {"trials_per_speed": 1, "detectors": ["b"], "oracle_delays_ms": []},
+        }
+    )
+    apply_demo(scen, "x")
+    bad = OmegaConf.create({"detectors": {"a": {}}, "demo": {"detectors": ["zz"]}})
+    with pytest.raises(SlipkitError, match=r"demo.detectors: \['zz'\]"):
+        apply_demo(bad, "x")
+    assert (1, 16, ["b"], []) == (
+        scen.trials_per_speed,
+        scen.train_trials,
+        list(scen.detectors),
+        list(scen.oracle_delays_ms),
+    )
