@@ -126,6 +126,22 @@ MALFORMED: list[tuple[list[str], str]] = [
     (["info"], "dataset=...: missing; this option is required"),
     (["info", "dataset={ds}", "verify=maybe"], "verify=maybe: expected true or false"),
     (["info", "dataset={ds}", "json=1"], "json=1: expected true or false"),
+    # sweep (one Optuna study over train runs)
+    (["sweep", "experiment=tactip_svm"], "search=...: missing; this option is"),
+    (["sweep", "search=tactip_svm", "n_trials=2.9"], "n_trials=2.9: expected a whole"),
+    (["sweep", "search=nope"], "Could not find 'search/nope'; available: "),
+    (
+        ["sweep", "search=tactip_svm", "search.params.model.C.low=0"],
+        "search.params.model.C: ",
+    ),
+    (
+        ["sweep", "search=tactip_svm", "storage=nonsense"],
+        "storage=nonsense: not a database URL",
+    ),
+    (
+        ["sweep", "search=tactip_svm", "grace_s=30", "heartbeat_s=60"],
+        "grace_s=30: must exceed heartbeat_s=60",
+    ),
     # train
     (["train", "experiment=nope"], "Could not find 'experiment/nope'; available: "),
     (["train", "seed=-1"], "seed=-1: expected a whole number in [0, 4294967295]"),
