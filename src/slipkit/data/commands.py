@@ -12,8 +12,8 @@ from omegaconf import DictConfig
 
 from slipkit._files import check_out_path
 from slipkit.data.dataset import Dataset
-from slipkit.data.io import load_dataset, save_dataset
-from slipkit.data.summary import summarize, summary_dict
+from slipkit.data.io import save_dataset
+from slipkit.data.summary import format_summary, summary_of_folder
 from slipkit.errors import SourceFormatError
 
 
@@ -31,17 +31,18 @@ def import_main(cfg: DictConfig) -> Path:
     )
     dataset = reader(src)
     out = save_dataset(dataset, out, overwrite=bool(cfg.overwrite))
-    print(summarize(load_dataset(out)))
+    del dataset  # the summary re-reads the written folder a chunk at a time
+    print(format_summary(summary_of_folder(out)))
     print(out)
     return out
 
 
 def info_main(cfg: DictConfig) -> dict[str, Any]:
     """Print the summary of the dataset folder ``cfg.dataset``."""
-    dataset = load_dataset(Path(str(cfg.dataset)), verify=bool(cfg.verify))
-    info = summary_dict(dataset)
+    # a chunk of trials at a time: memory does not grow with the recording (issue 17)
+    info = summary_of_folder(Path(str(cfg.dataset)), verify=bool(cfg.verify))
     if cfg.json:
         print(json.dumps(info, indent=2, default=str))
     else:
-        print(summarize(dataset))
+        print(format_summary(info))
     return info

@@ -10,12 +10,13 @@ Layout (documented for users in ``docs/dataset-format.md``)::
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
+import pyarrow.parquet as pq
 
 from slipkit import __version__
 from slipkit._files import atomic_dir, recover_leftovers, sha256_file
@@ -29,6 +30,10 @@ from slipkit.errors import DatasetError
 
 MANIFEST = "manifest.json"
 TRIALS = "trials.parquet"
+#: Rows per Parquet row group in the files :func:`save_dataset` writes.
+ROW_GROUP_ROWS = 65_536
+#: Rows (summed over streams) a chunk of :func:`iter_dataset_chunks` aims at.
+CHUNK_ROWS = 262_144
 
 
 def stream_file(name: str) -> str:
@@ -38,8 +43,16 @@ def stream_file(name: str) -> str:
 
 def _write_parquet(df: pd.DataFrame, path: Path) -> None:
     # zstd keeps float channels small; the writer is deterministic for a given
-    # pyarrow version, so one seed gives byte-identical files.
-    df.to_parquet(path, index=False, compression="zstd", engine="pyarrow")
+    # pyarrow version, so one seed gives byte-identical files. Row groups of
+    # ROW_GROUP_ROWS rows let a reader take a few trials at a time
+    # (iter_dataset_chunks) instead of decompressing a whole stream.
+    df.to_parquet(
+        path,
+        index=False,
+        compression="zstd",
+        engine="pyarrow",
+        row_group_size=ROW_GROUP_ROWS,
+    )
 
 
 def save_dataset(
@@ -202,6 +215,33 @@ def load_dataset(path: Path | str, *, verify: bool = True) -> Dataset:
         Naming the file and the field or column at fault, and what was expected.
     """
     path = Path(path)
+    manifest, specs, labels, trials = _open_folder(path, verify=verify)
+    tables = {s: _read_parquet(path, stream_file(s)) for s in specs}
+    dataset = Dataset(
+        sensor=manifest["sensor"],
+        streams=specs,
+        trials=trials,
+        tables=tables,
+        labels=labels,
+        groups=manifest["groups"],
+        provenance=manifest["provenance"],
+        name=str(manifest.get("name", "")) or path.name,
+        sources={
+            "trials": str(path / TRIALS),
+            **{s: str(path / stream_file(s)) for s in specs},
+        },
+    )
+    for s, table in dataset.tables.items():
+        _check_channels_hold_data(table, dataset.streams[s], path / stream_file(s))
+    return dataset
+
+
+def _open_folder(
+    path: Path, *, verify: bool
+) -> tuple[dict[str, Any], dict[str, StreamSpec], dict[str, LabelSpec], pd.DataFrame]:
+    """The checks every reader of a dataset folder runs before any stream is read:
+    manifest, listed files (inside the folder, present, sha256 if ``verify``), the
+    trials table. Returns the manifest, stream specs, label specs and trials table."""
     recover_leftovers(path)  # an interrupted overwrite: restore or report it
     manifest = read_manifest(path)
     mpath = str(path / MANIFEST)
@@ -249,25 +289,163 @@ def load_dataset(path: Path | str, *, verify: bool = True) -> Dataset:
             mpath,
             f"field 'n_trials' is {n_trials}, but {TRIALS} has {len(trials)} rows",
         )
-    tables = {s: _read_parquet(path, stream_file(s)) for s in specs}
     labels = {k: LabelSpec.from_json(k, v) for k, v in manifest["labels"].items()}
-    dataset = Dataset(
-        sensor=manifest["sensor"],
-        streams=specs,
-        trials=trials,
-        tables=tables,
-        labels=labels,
-        groups=manifest["groups"],
-        provenance=manifest["provenance"],
-        name=str(manifest.get("name", "")) or path.name,
-        sources={
-            "trials": str(path / TRIALS),
-            **{s: str(path / stream_file(s)) for s in specs},
-        },
+    return manifest, specs, labels, trials
+
+
+def _parquet_error(file: Path, exc: Exception) -> DatasetError:
+    return DatasetError(
+        str(file), f"could not be read as Parquet ({type(exc).__name__}: {exc})"
     )
-    for s, table in dataset.tables.items():
-        _check_channels_hold_data(table, dataset.streams[s], path / stream_file(s))
-    return dataset
+
+
+def _scan_trial_rows(
+    pf: pq.ParquetFile, file: Path, spec: StreamSpec
+) -> tuple[dict[str, int], dict[str, list[int]]]:
+    """One pass over a stream's ``trial_id`` column, a row group at a time: rows per
+    trial and the row groups holding each trial. Refuses a trial whose rows are not
+    contiguous in the whole file (the check :class:`Dataset` makes per table)."""
+    expected = ["trial_id", "t", *spec.channels]
+    names = pf.schema_arrow.names
+    missing = [c for c in expected if c not in names]
+    if missing:
+        raise DatasetError(
+            str(file), f"missing columns {missing}; expected columns {expected}"
+        )
+    rows: dict[str, int] = {}
+    where: dict[str, list[int]] = {}
+    last: str | None = None
+    for rg in range(pf.num_row_groups):
+        try:
+            col = pf.read_row_group(rg, columns=["trial_id"]).column(0)
+        except Exception as exc:  # pyarrow raises several types for corrupt files
+            raise _parquet_error(file, exc) from exc
+        ids = col.to_pandas().astype(str).to_numpy()
+        if not len(ids):
+            continue
+        starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
+        lengths = np.diff(np.r_[starts, len(ids)])
+        for tid, n in zip(ids[starts], lengths, strict=True):
+            if tid != last and tid in rows:
+                raise DatasetError(
+                    str(file),
+                    "rows of one trial are not contiguous; expected rows grouped by 'trial_id'",
+                )
+            last = tid
+            rows[tid] = rows.get(tid, 0) + int(n)
+            groups = where.setdefault(tid, [])
+            if not groups or groups[-1] != rg:
+                groups.append(rg)
+    return rows, where
+
+
+def iter_dataset_chunks(
+    path: Path | str, *, verify: bool = True, max_rows: int = CHUNK_ROWS
+) -> Iterator[Dataset]:
+    """The dataset folder as consecutive :class:`Dataset` chunks of whole trials.
+
+    Runs every check of :func:`load_dataset` (the manifest, files and trials table
+    first; each chunk through :class:`Dataset`; trial ids, contiguity and channels
+    that never hold a number over the whole file), but holds only about
+    ``max_rows`` stream rows at a time: each chunk reads only the Parquet row groups
+    of its trials (:data:`ROW_GROUP_ROWS` rows each in files written by
+    :func:`save_dataset`; a file written as one row group is read whole per chunk).
+    For a task that needs one trial at a time (``slipkit info``, summaries).
+
+    Parameters
+    ----------
+    path : path-like
+        The dataset folder.
+    verify : bool
+        Check every file's sha256 against the manifest first.
+    max_rows : int
+        Stream rows (summed over streams) a chunk aims at; a chunk holds at least
+        one trial, so one longer trial makes a larger chunk.
+
+    Yields
+    ------
+    Dataset
+        Trials in the trials table's order, each trial in exactly one chunk.
+
+    Raises
+    ------
+    DatasetError
+        As :func:`load_dataset`: naming the file and the field or column at fault.
+    """
+    path = Path(path)
+    manifest, specs, labels, trials = _open_folder(path, verify=verify)
+    trials = trials.reset_index(drop=True)
+    ids = trials["trial_id"].astype(str)
+    files = {s: path / stream_file(s) for s in specs}
+    readers: dict[str, pq.ParquetFile] = {}
+    rows: dict[str, dict[str, int]] = {}
+    where: dict[str, dict[str, list[int]]] = {}
+    for s, file in files.items():
+        try:
+            readers[s] = pq.ParquetFile(file)
+        except Exception as exc:  # pyarrow raises several types for corrupt files
+            raise _parquet_error(file, exc) from exc
+        rows[s], where[s] = _scan_trial_rows(readers[s], file, specs[s])
+        unknown = set(rows[s]) - set(ids)
+        if unknown:
+            raise DatasetError(
+                str(file),
+                f"column 'trial_id' names trials not in trials.parquet: {sorted(unknown)[:5]}",
+            )
+    finite = {s: dict.fromkeys(specs[s].channels, False) for s in specs}
+    total = dict.fromkeys(specs, 0)
+    common = {
+        "sensor": manifest["sensor"],
+        "streams": specs,
+        "labels": labels,
+        "groups": manifest["groups"],
+        "provenance": manifest["provenance"],
+        "name": str(manifest.get("name", "")) or path.name,
+        "sources": {
+            "trials": str(path / TRIALS),
+            **{s: str(f) for s, f in files.items()},
+        },
+    }
+
+    def chunk(first: int, stop: int) -> Dataset:
+        keep = set(ids.iloc[first:stop])
+        tables = {}
+        for s, pf in readers.items():
+            rgs = sorted({rg for tid in keep for rg in where[s].get(tid, ())})
+            try:
+                table = (
+                    pf.read_row_groups(rgs).to_pandas()
+                    if rgs
+                    else pf.schema_arrow.empty_table().to_pandas()
+                )
+            except Exception as exc:  # pyarrow raises several types for corrupt files
+                raise _parquet_error(files[s], exc) from exc
+            tables[s] = table[table["trial_id"].astype(str).isin(keep)]
+        part = Dataset(trials=trials.iloc[first:stop], tables=tables, **common)
+        for s, table in part.tables.items():
+            total[s] += len(table)
+            for col, seen in finite[s].items():
+                if not seen:
+                    values = table[col].to_numpy(dtype=np.float64, na_value=np.nan)
+                    finite[s][col] = bool(np.isfinite(values).any())
+        return part
+
+    first, n = 0, 0
+    for i, tid in enumerate(ids):
+        n += sum(r.get(tid, 0) for r in rows.values())
+        if n >= max_rows:
+            yield chunk(first, i + 1)
+            first, n = i + 1, 0
+    if first < len(ids):
+        yield chunk(first, len(ids))
+    for s, seen in finite.items():
+        empty = [c for c, ok in seen.items() if not ok]
+        if total[s] and empty:
+            raise DatasetError(
+                str(files[s]),
+                f"column '{empty[0]}' has no finite value in its {total[s]} rows (all "
+                "NaN or infinite); a channel must hold data",
+            )
 
 
 def _check_channels_hold_data(

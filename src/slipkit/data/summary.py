@@ -1,36 +1,90 @@
-"""A dataset's summary: what ``slipkit info`` prints."""
+"""A dataset's summary: what ``slipkit info`` prints.
+
+:func:`summary_dict` summarises a dataset in memory; :func:`summary_of_folder` gives the
+same summary of a dataset folder while holding only a few trials at a time
+(:func:`slipkit.data.io.iter_dataset_chunks`), so the memory ``slipkit info`` needs
+does not grow with the recording's length.
+"""
 
 from __future__ import annotations
 
 import json
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from slipkit.data.dataset import Dataset
+from slipkit.data.io import CHUNK_ROWS, iter_dataset_chunks
+
+
+def _spans(table: pd.DataFrame) -> pd.Series:
+    """Per trial of a long table, last minus first time stamp (s), in table order."""
+    if not len(table):
+        return pd.Series(dtype=float)
+    return table.groupby("trial_id", sort=False)["t"].agg(
+        lambda t: float(t.iloc[-1] - t.iloc[0])
+    )
 
 
 def summary_dict(dataset: Dataset) -> dict[str, Any]:
     """Trials, streams (rate, channels, rows, duration), labels with class counts, groups."""
+    stats = {
+        name: (len(table), _spans(table)) for name, table in dataset.tables.items()
+    }
+    return _summary(dataset, dataset.trials, stats)
+
+
+def summary_of_folder(
+    path: Path | str, *, verify: bool = True, max_rows: int = CHUNK_ROWS
+) -> dict[str, Any]:
+    """:func:`summary_dict` of the dataset folder ``path``, read a chunk of trials at a time.
+
+    Every check of :func:`slipkit.data.io.load_dataset` runs; the peak memory is that of
+    one chunk (about ``max_rows`` stream rows) plus one number per trial.
+    """
+    trials: list[pd.DataFrame] = []
+    rows: dict[str, int] = {}
+    spans: dict[str, list[pd.Series]] = {}
+    last: Dataset | None = None
+    for part in iter_dataset_chunks(path, verify=verify, max_rows=max_rows):
+        trials.append(part.trials)
+        for name, table in part.tables.items():
+            rows[name] = rows.get(name, 0) + len(table)
+            spans.setdefault(name, []).append(_spans(table))
+        last = part
+    assert last is not None  # iter_dataset_chunks refuses a dataset without trials
+    stats = {
+        name: (
+            rows[name],
+            pd.concat([s for s in spans[name] if len(s)])
+            if any(len(s) for s in spans[name])
+            else pd.Series(dtype=float),
+        )
+        for name in last.streams
+    }
+    return _summary(last, pd.concat(trials, ignore_index=True), stats)
+
+
+def _summary(
+    dataset: Dataset,
+    trials: pd.DataFrame,
+    stats: dict[str, tuple[int, pd.Series]],
+) -> dict[str, Any]:
+    """The summary from ``dataset``'s specs, the whole trials table and, per stream,
+    its row count and per-trial spans (s)."""
     streams: dict[str, Any] = {}
     for name, spec in dataset.streams.items():
-        table = dataset.tables[name]
-        span = (
-            table.groupby("trial_id", sort=False)["t"].agg(
-                lambda t: float(t.iloc[-1] - t.iloc[0])
-            )
-            if len(table)
-            else pd.Series(dtype=float)
-        )
+        n_rows, span = stats[name]
         streams[name] = {
             "kind": spec.kind,
             "rate_hz": spec.rate_hz,
             "channels": len(spec.channels),
             "channel_names": _abbrev(list(spec.channels)),
             "units": sorted(set(spec.units.values())),
-            "rows": len(table),
-            "trials_with_stream": int(table["trial_id"].nunique()) if len(table) else 0,
+            "rows": n_rows,
+            "trials_with_stream": len(span),
             "duration_s": None
             if spec.kind == "snapshot" or span.empty
             else {
@@ -42,7 +96,7 @@ def summary_dict(dataset: Dataset) -> dict[str, Any]:
         }
     labels: dict[str, Any] = {}
     for name, lab in dataset.labels.items():
-        col = dataset.trials[name]
+        col = trials[name]
         if lab.classes is not None:
             counts = col.astype(str).value_counts()
             labels[name] = {c: int(counts.get(c, 0)) for c in lab.classes}
@@ -59,11 +113,11 @@ def summary_dict(dataset: Dataset) -> dict[str, Any]:
                     else {}
                 ),
             }
-    groups = {g: int(dataset.trials[g].nunique()) for g in dataset.groups}
+    groups = {g: int(trials[g].nunique()) for g in dataset.groups}
     return {
         "name": dataset.name,
         "sensor": dataset.sensor,
-        "trials": len(dataset),
+        "trials": len(trials),
         "streams": streams,
         "labels": labels,
         "groups": groups,
@@ -79,7 +133,11 @@ def _abbrev(names: list[str], keep: int = 3) -> str:
 
 def summarize(dataset: Dataset) -> str:
     """Human-readable summary of a dataset (the text ``slipkit info`` prints)."""
-    info = summary_dict(dataset)
+    return format_summary(summary_dict(dataset))
+
+
+def format_summary(info: dict[str, Any]) -> str:
+    """The text of a summary made by :func:`summary_dict` or :func:`summary_of_folder`."""
     lines = [
         f"dataset   {info['name']}",
         f"sensor    {info['sensor']}",
