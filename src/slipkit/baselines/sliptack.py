@@ -82,6 +82,15 @@ def f_max_values(f_max_range: Sequence[float], step: float = 1.0) -> FloatArray:
     return np.arange(lo, hi + 1e-9 * step, step)
 
 
+def gate_first_bin(nfft: int, detrend_frames: int) -> int:
+    """First DFT bin of the ``min_peak_to_mean`` gate's band: ``ceil(2 nfft / detrend_frames)``, >= 1.
+
+    Bin ``k`` is ``k rate / nfft`` Hz, so this is the first at or above twice the
+    moving average's cutoff ``rate / detrend_frames`` (capped at ``nfft / 2``).
+    """
+    return int(min(max(1, -(-2 * int(nfft) // int(detrend_frames))), int(nfft) // 2))
+
+
 def dominant_frequency(
     x: ArrayLike,
     rate_hz: float,
@@ -95,6 +104,7 @@ def dominant_frequency(
     harmonics: str = "keep",
     harmonic_tol: float = 0.03,
     interpolate: bool = False,
+    min_peak_to_mean: float = 0.0,
 ) -> float:
     """Dominant stick-slip frequency ``f_d`` of one signal window (Hz), eqs. 6-7.
 
@@ -133,6 +143,17 @@ def dominant_frequency(
         none where a neighbour is 0). The ranking and the ``f_max`` limits still use
         the bin frequency. A slipkit addition: the DFT bin (``rate_hz / (n
         pad_factor)``, 1 Hz for 1000 samples at 1 kHz) is ~2 % of a 50 Hz frequency.
+    min_peak_to_mean : float
+        The "stick-slip oscillation present" gate: NaN unless the largest spectral
+        power in the gate band is at least this times the band's mean power. The
+        band is the bins from twice the detrend's cutoff (``2 rate_hz /
+        detrend_frames``, :func:`gate_first_bin`) up: below it the moving average's
+        repeated edge samples leave a low-frequency bump even in white noise.
+        0: off (the paper: any local maximum makes a frequency, so a still object's
+        noise spectrum reads as a speed). For Gaussian white noise the
+        periodogram's bins are about exponential, so the largest of ``M`` reaches
+        ``T`` times the mean with probability ~``M exp(-T)``: 20 keeps that near
+        1e-6 for ``M`` = 500 bins. A slipkit addition.
 
     Returns
     -------
@@ -153,6 +174,11 @@ def dominant_frequency(
         return float("nan")
     nfft = n * int(pad_factor)
     mag = np.abs(np.fft.rfft(resid * np.hamming(n), nfft))
+    if min_peak_to_mean > 0.0:
+        k0 = gate_first_bin(nfft, min(int(detrend_frames), n))
+        power = mag[k0:] ** 2
+        if float(np.max(power)) < float(min_peak_to_mean) * float(np.mean(power)):
+            return float("nan")
     freqs = np.fft.rfftfreq(nfft, 1.0 / float(rate_hz))
     fmax = f_max_values(f_max_range, f_max_step)
     peaks, _ = find_peaks(mag)
@@ -351,8 +377,8 @@ class StickSlipSpeed(RegressorMixin, BaseEstimator):
         Samples between estimates (frames).
     detrend_frames, n_peaks, f_max_range, f_max_step, pad_factor, min_peak_ratio
         As in :func:`dominant_frequency` (the paper: 300, 10, (15, 40) Hz, 1 Hz, 1, 0).
-    harmonics, harmonic_tol, interpolate
-        As in :func:`dominant_frequency` (the paper: "keep", -, False).
+    harmonics, harmonic_tol, interpolate, min_peak_to_mean
+        As in :func:`dominant_frequency` (the paper: "keep", -, False, 0).
     allow_aliasing : bool
         ``fit`` refuses (:class:`~slipkit.errors.SlipkitError`) a ``f_max_range``
         reaching the Nyquist limit ``rate_hz / 2``, and a rate whose Nyquist limit is
@@ -413,6 +439,7 @@ class StickSlipSpeed(RegressorMixin, BaseEstimator):
         "harmonics": [StrOptions({"keep", "fundamental"})],
         "harmonic_tol": [Interval(Real, 0, 1, closed="left")],
         "interpolate": ["boolean"],
+        "min_peak_to_mean": [Interval(Real, 0, None, closed="left")],
         "allow_aliasing": ["boolean"],
         "form": [StrOptions({"exact", "paper"})],
         "normal_force_N": [Interval(Real, 0, None, closed="neither")],
@@ -439,6 +466,7 @@ class StickSlipSpeed(RegressorMixin, BaseEstimator):
         harmonics: str = "keep",
         harmonic_tol: float = 0.03,
         interpolate: bool = False,
+        min_peak_to_mean: float = 0.0,
         allow_aliasing: bool = False,
         form: str = "exact",
         normal_force_N: float = 0.05,
@@ -461,6 +489,7 @@ class StickSlipSpeed(RegressorMixin, BaseEstimator):
         self.harmonics = harmonics
         self.harmonic_tol = harmonic_tol
         self.interpolate = interpolate
+        self.min_peak_to_mean = min_peak_to_mean
         self.allow_aliasing = allow_aliasing
         self.form = form
         self.normal_force_N = normal_force_N
@@ -485,6 +514,7 @@ class StickSlipSpeed(RegressorMixin, BaseEstimator):
             harmonics=self.harmonics,
             harmonic_tol=self.harmonic_tol,
             interpolate=self.interpolate,
+            min_peak_to_mean=self.min_peak_to_mean,
         )
 
     def segment_frequency(self, x: ArrayLike) -> float:

@@ -939,7 +939,11 @@ def _deploy_sliptack_speed(
     the threshold from the export config's ``regression.threshold`` (mm/s; 0: slip
     whenever a stick-slip frequency is found), class ``"1"``.
     """
-    from slipkit.export.sliptack import SpeedSlipDetector
+    from slipkit.export.sliptack import (
+        SpeedSlipDetector,
+        incremental_problem,
+        sliding_spectrum_step,
+    )
     from slipkit.train.tasks.sliptack import DEFAULT, SlipTackSpeed, _split
 
     assert isinstance(task, SlipTackSpeed)
@@ -959,6 +963,8 @@ def _deploy_sliptack_speed(
         )
     reg = dict(options.get("regression") or {})
     threshold = float(reg.get("threshold") or 0.0)
+    steps: list[dict[str, Any]] = []
+    export_options: dict[str, Any] = {}
     from slipkit.models.spectral import SpectralSpeedRegressor
 
     if isinstance(est, SpectralSpeedRegressor):  # learned: export/spectral.py's graph
@@ -969,6 +975,15 @@ def _deploy_sliptack_speed(
     else:
         detector = SpeedSlipDetector(speed=est, threshold=threshold).fit()
         holds = f"StickSlipSpeed ({est.form} form, material '*')"
+        # the spectrum updated per hop by the runtime op sliding_spectrum, the graph
+        # reading it (export/sliptack.py, Incremental); else the whole window per call
+        why = incremental_problem(est)
+        if why is None:
+            steps = [sliding_spectrum_step(est)]
+            export_options = {"incremental": True}
+            holds += "; spectrum per hop by the runtime op sliding_spectrum"
+        else:
+            holds += f"; whole-window spectrum per call (no sliding form: {why})"
     split = run_metrics(run).get("split", {})
     if split.get("test"):
         test_ids = list(split["test"])
@@ -978,8 +993,8 @@ def _deploy_sliptack_speed(
     channels = [task.column]
     return Deployment(
         frame=_frame([stream], channels, int(est.window), int(est.hop), rate),
-        preprocessing=[],
-        export_options={},
+        preprocessing=steps,
+        export_options=export_options,
         positive="1",
         debounce_k=int(options.get("debounce_k") or 1),
         trials=trial_frames(dataset, test_ids, stream, channels),

@@ -986,7 +986,8 @@ def _preprocessed_windows(
     As :class:`slipkit.runtime.StreamLoop` makes them for one recording: the
     runtime's own :class:`~slipkit.runtime.preprocessing.Pipeline`, fresh, on the
     float64 window of every call from the first (``window - 1``, then every ``hop``),
-    in order, so stateful steps see what they would see live; then float32.
+    in order, so stateful steps see what they would see live; then float32, in the
+    graph's input shape (e.g. a power spectrum for ``sliding_spectrum``).
     """
     from slipkit.runtime.preprocessing import Pipeline
 
@@ -994,12 +995,13 @@ def _preprocessed_windows(
     pipe = Pipeline(list(graph.preprocessing), (w, c), "graph preprocessing")
     calls = np.arange(w - 1, len(x), graph.hop)
     want = {int(i): k for k, i in enumerate(inst)}
-    out = np.empty((len(inst), w, c), dtype=np.float32)
+    shape = tuple(int(v) for v in graph.input_shape[1:])
+    out = np.empty((len(inst), *shape), dtype=np.float32)
     for end in calls:
         y = pipe(x[end - w + 1 : end + 1])
         k = want.get(int(end))
         if k is not None:
-            out[k] = np.reshape(y, (w, c))
+            out[k] = np.reshape(y, shape)
     return out
 
 

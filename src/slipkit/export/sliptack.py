@@ -70,6 +70,7 @@ from sklearn.utils.validation import check_is_fitted
 from slipkit.baselines.sliptack import (
     StickSlipSpeed,
     f_max_values,
+    gate_first_bin,
     harmonic_relation,
 )
 from slipkit.export._graph import DOUBLE, FLOAT, GraphBuilder
@@ -166,7 +167,6 @@ def _frequency(g: GraphBuilder, x: str, est: StickSlipSpeed, dft_dtype: str) -> 
     maximum and ``f_d`` is ``0 / 0 = NaN``, the batch estimator's value.
     """
     w = int(est.window)
-    rate = float(est.rate_hz)
     nfft = w * int(est.pad_factor)
     s = min(int(est.detrend_frames), w)
     # 1. detrend: the residual is invariant to a constant shift; subtracting the first
@@ -205,6 +205,26 @@ def _frequency(g: GraphBuilder, x: str, est: StickSlipSpeed, dft_dtype: str) -> 
     last = nfft // 2
     ks = (np.arange(n1)[:, None] + n1 * np.arange(k2n)[None, :]).reshape(-1)
     pos = np.argsort(ks)[: last + 1]  # pos[k]: where bin k sits in ``power``
+    return _peak_frequency(g, power, pos, n1 * k2n, est, dt)
+
+
+def _peak_frequency(
+    g: GraphBuilder,
+    power: str,
+    pos: NDArray[np.intp],
+    n_power: int,
+    est: StickSlipSpeed,
+    dt: type[np.floating[Any]],
+) -> str:
+    """Nodes from the power spectrum ``power`` (b, n_power) to ``f_d`` (Hz, float64, NaN).
+
+    ``pos[k]`` is where DFT bin ``k`` (0 .. nfft / 2) sits along ``power``'s axis 1;
+    other entries are ignored. Steps 3 (peaks, eqs. 6-7) and the gate of the module
+    docstring.
+    """
+    rate = float(est.rate_hz)
+    nfft = int(est.window) * int(est.pad_factor)
+    last = nfft // 2
     # 3. peaks: interior bins 1..c with freq <= the largest f_max (find_peaks skips the ends)
     freqs = np.fft.rfftfreq(nfft, 1.0 / rate)
     fmax = f_max_values(tuple(est.f_max_range), float(est.f_max_step))
@@ -220,8 +240,9 @@ def _frequency(g: GraphBuilder, x: str, est: StickSlipSpeed, dft_dtype: str) -> 
 
     mid = bins(1)
     # the largest magnitude of the spectrum, DC excluded (bins beyond nfft / 2 masked)
-    spectrum = np.isin(np.arange(n1 * k2n), pos[1:])
-    gmax = _reduce(g, "ReduceMax", g.op("Mul", power, g.const(spectrum, dt)), (1,), 1)
+    spectrum = np.isin(np.arange(n_power), pos[1:])
+    masked = g.op("Mul", power, g.const(spectrum, dt))
+    gmax = _reduce(g, "ReduceMax", masked, (1,), 1)
     ratio2 = float(est.min_peak_ratio) ** 2  # on power
     lower, upper = bins(0), bins(2)
     peak = g.op(
@@ -230,6 +251,19 @@ def _frequency(g: GraphBuilder, x: str, est: StickSlipSpeed, dft_dtype: str) -> 
         g.op("GreaterOrEqual", mid, g.op("Mul", gmax, g.const(ratio2, dt))),
         stem="peak",
     )  # (b, c)
+    gate = float(getattr(est, "min_peak_to_mean", 0.0) or 0.0)
+    if gate > 0.0:
+        # no stick-slip oscillation: the largest bin of the gate band is not gate x
+        # the band's mean power (gate_first_bin); then no peak counts, f_d is NaN
+        k0 = gate_first_bin(nfft, min(int(est.detrend_frames), int(est.window)))
+        band = g.op("Mul", power, g.const(np.isin(np.arange(n_power), pos[k0:]), dt))
+        mean = g.op(
+            "Mul",
+            g.op("ReduceSum", band, _axes(g, 1), keepdims=1),
+            g.const(gate / (last + 1 - k0), dt),
+        )
+        bmax = _reduce(g, "ReduceMax", band, (1,), 1)
+        peak = g.op("And", peak, g.op("GreaterOrEqual", bmax, mean), stem="gated")
     if est.harmonics == "fundamental":
         # a counted peak at ~m x a lower counted peak is a harmonic: one MatMul with a
         # constant (c, c) relation of the bins (harmonic_mask's rule on bin numbers)
@@ -411,6 +445,7 @@ def export_stick_slip_speed(
     quantity: str = "speed",
     threshold: float | None = None,
     dft_dtype: str = "float32",
+    incremental: bool = False,
     opset: int = DEFAULT_OPSET,
 ) -> DetectorGraph:
     """Export a fitted :class:`StickSlipSpeed` over a window of ``window`` nib samples.
@@ -426,14 +461,23 @@ def export_stick_slip_speed(
         Slip decision ``score >= threshold`` (mm/s or Hz); the graph then has classes
         ``("0", "1")``. None: a regression graph without decision.
     dft_dtype : {"float32", "float64"}
-        Precision of the two DFT products (module docstring, step 2).
+        Precision of the two DFT products (module docstring, step 2); with
+        ``incremental``, of the peak search on the power spectrum.
+    incremental : bool
+        Steps 1-2 (detrend, Hamming, DFT) as the runtime op ``sliding_spectrum``
+        (:mod:`slipkit.runtime.sliding_spectrum`: the spectrum updated per hop
+        from the previous one), the graph reading its power spectrum ``(batch,
+        nfft / 2 + 1)`` (module docstring, *Incremental*). Needs the detrend's
+        range boundaries on the hop grid (:func:`incremental_problem`).
     opset : int
         Default-domain opset (17 or 18).
 
     Returns
     -------
     DetectorGraph
-        Input ``(batch, window, 1)`` nib samples, oldest first; ``score`` ``(batch,)``
+        Input ``(batch, window, 1)`` nib samples, oldest first (incremental: the
+        power spectrum, with the ``sliding_spectrum`` step in ``preprocessing``);
+        ``score`` ``(batch,)``
         float32, :data:`~slipkit.export.detectors.NO_SCORE` where the estimator gives
         NaN; ``hop`` the estimator's, ``first_decision = window - 1``.
     """
@@ -457,14 +501,28 @@ def export_stick_slip_speed(
         )
     w = int(estimator.window)
     g = GraphBuilder(f"stick_slip_{quantity}", opset)
-    inp = helper.make_tensor_value_info(WINDOW_INPUT, FLOAT, ["batch", w, 1])
-    x = g.op(
-        "Reshape",
-        g.op("Cast", WINDOW_INPUT, to=DOUBLE),
-        g.const([-1, w], np.int64),
-        stem="x",
-    )
-    value = _frequency(g, x, estimator, dft_dtype)
+    steps: tuple[dict[str, Any], ...] = ()
+    if incremental:
+        why = incremental_problem(estimator)
+        if why is not None:
+            raise ExportError(f"StickSlipSpeed incremental export: {why}")
+        nb = w * int(estimator.pad_factor) // 2 + 1
+        steps = (sliding_spectrum_step(estimator),)
+        inp = helper.make_tensor_value_info(WINDOW_INPUT, FLOAT, ["batch", nb])
+        dt = np.float32 if dft_dtype == "float32" else np.float64
+        power = (
+            WINDOW_INPUT if dt is np.float32 else g.op("Cast", WINDOW_INPUT, to=DOUBLE)
+        )
+        value = _peak_frequency(g, power, np.arange(nb), nb, estimator, dt)
+    else:
+        inp = helper.make_tensor_value_info(WINDOW_INPUT, FLOAT, ["batch", w, 1])
+        x = g.op(
+            "Reshape",
+            g.op("Cast", WINDOW_INPUT, to=DOUBLE),
+            g.const([-1, w], np.int64),
+            stem="x",
+        )
+        value = _frequency(g, x, estimator, dft_dtype)
     note: dict[str, Any] = {}
     if quantity == "speed":
         value, note = _speed(g, value, estimator)
@@ -497,7 +555,7 @@ def export_stick_slip_speed(
     return DetectorGraph(
         model=model,
         input_name=WINDOW_INPUT,
-        input_shape=("batch", w, 1),
+        input_shape=("batch", w, 1) if not incremental else ("batch", nb),
         output_names=(SCORE,),
         score_output=SCORE,
         score_meaning=meaning,
@@ -505,7 +563,12 @@ def export_stick_slip_speed(
         opset=g.opset,
         classes=None if threshold is None else ("0", "1"),
         threshold=None if threshold is None else float(threshold),
-        input_meaning=f"the last {w} nib samples at {float(estimator.rate_hz):g} Hz, oldest first",
+        input_meaning=(
+            f"the last {w} nib samples at {float(estimator.rate_hz):g} Hz, oldest first"
+            if not incremental
+            else f"the power spectrum (bins 0..{nb - 1}) of the detrended, Hamming-"
+            f"weighted last {w} nib samples (runtime op sliding_spectrum)"
+        ),
         features={
             "kind": "detector_window",
             "detector": type(estimator).__name__,
@@ -517,6 +580,10 @@ def export_stick_slip_speed(
             "interpolate": bool(estimator.interpolate),
             "dft_factors": list(_factor(w * int(estimator.pad_factor))),
             "dft_dtype": dft_dtype,
+            "incremental": bool(incremental),
+            "min_peak_to_mean": float(
+                getattr(estimator, "min_peak_to_mean", 0.0) or 0.0
+            ),
             **note,
             "stick_length_m": float(estimator.stick_length_m_),
             "saturation_hz": float(estimator.saturation_hz_),
@@ -526,7 +593,27 @@ def export_stick_slip_speed(
         hop=int(estimator.hop),
         first_decision=w - 1,
         strict=False,
+        preprocessing=steps,
     )
+
+
+def incremental_problem(estimator: StickSlipSpeed) -> str | None:
+    """Why ``estimator`` has no incremental export (None when it has one)."""
+    from slipkit.runtime.sliding_spectrum import check_sliding_grid
+
+    return check_sliding_grid(
+        int(estimator.window), int(estimator.detrend_frames), int(estimator.hop)
+    )
+
+
+def sliding_spectrum_step(estimator: StickSlipSpeed) -> dict[str, Any]:
+    """The runtime step computing ``estimator``'s power spectrum per hop (``sliding_spectrum``)."""
+    return {
+        "op": "sliding_spectrum",
+        "detrend_frames": int(estimator.detrend_frames),
+        "hop": int(estimator.hop),
+        "nfft": int(estimator.window) * int(estimator.pad_factor),
+    }
 
 
 def graph_speeds(out: ArrayLike) -> FloatArray:
@@ -600,12 +687,17 @@ def export_speed_slip_detector(
     detector: SpeedSlipDetector,
     *,
     dft_dtype: str = "float32",
+    incremental: bool = False,
     opset: int = DEFAULT_OPSET,
 ) -> DetectorGraph:
     """Export a fitted :class:`SpeedSlipDetector`: the speed graph with its threshold."""
     check_is_fitted(detector, "threshold_")
     return export_stick_slip_speed(
-        detector.speed, threshold=detector.threshold_, dft_dtype=dft_dtype, opset=opset
+        detector.speed,
+        threshold=detector.threshold_,
+        dft_dtype=dft_dtype,
+        incremental=incremental,
+        opset=opset,
     )
 
 
@@ -701,6 +793,8 @@ __all__ = [
     "export_speed_slip_detector",
     "export_stick_slip_speed",
     "graph_speeds",
+    "incremental_problem",
+    "sliding_spectrum_step",
     "speed_table",
 ]
 

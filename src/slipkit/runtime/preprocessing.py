@@ -703,3 +703,7 @@ def _press_sign(f: Fields, in_shape: tuple[int, ...]) -> Op:
         )
     delta = f.number("delta", positive=True)
     return _PressSign(rest_n, block, hop, delta, in_shape)
+
+
+# -- the SlipTack spectrum, updated per hop (its own module; registers on import) ------------
+from slipkit.runtime import sliding_spectrum as _sliding_spectrum  # noqa: E402, F401
