@@ -226,8 +226,13 @@ def headline_plot(summary: pd.DataFrame, path: Path, *, title: str) -> Path:
     # Outside the axes: no legend can cover a point, whatever the numbers.
     ax1.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     budgets = bundles["p99_budget_us"].dropna().unique()
-    for b in budgets:
-        ax2.axvline(float(b), color="r", linestyle="--", label=f"p99 budget {b:.0f} us")
+    styles = ["--", ":", "-.", (0, (5, 1))]
+    for i, b in enumerate(budgets):
+        label = f"p99 budget {b:.0f} us"
+        if len(budgets) > 1:  # several sensor streams: say whose budget each line is
+            names = bundles.loc[bundles["p99_budget_us"] == b, "detector"]
+            label += f" ({', '.join(map(str, names))})"
+        ax2.axvline(float(b), color="r", linestyle=styles[i % len(styles)], label=label)
     if len(bundles):
         from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
 
