@@ -417,6 +417,10 @@ def check_estimators(comp: dict[str, Any], cfg: DictConfig) -> None:
             )
 
 
+#: replay frames each seed times at least (when ``cost.max_frames`` is split over seeds)
+MIN_SEED_FRAMES = 300
+
+
 def comparison_seeds(cfg: DictConfig, comp: dict[str, Any]) -> list[int]:
     """The seeds a comparison runs: ``seeds=`` (command line), else the comparison's
     ``seeds:``, else the one ``seed``.
@@ -503,10 +507,12 @@ def run_comparison(
     limits = verdict_limits(comp.get("verdict"), "comparison.verdict")
     analytic = [str(a) for a in comp.get("analytic") or []]
     cost_cfg = _container(cfg.get("cost") or OmegaConf.create({}))
-    # cost.max_frames is the timed decisions per estimator over all seeds: each seed
-    # times its share, so seeds add spread, not timing cost
+    # cost.max_frames is the timed frames per estimator over all seeds: each seed times
+    # its share (at least MIN_SEED_FRAMES, so a long window still reaches a decision),
+    # so seeds add spread, not timing cost
+    total = int(cost_cfg.get("max_frames", 2000))
     cost_cfg["max_frames"] = max(
-        1, math.ceil(int(cost_cfg.get("max_frames", 2000)) / len(seeds))
+        min(total, MIN_SEED_FRAMES), math.ceil(total / len(seeds))
     )
     keep = bool(cost_cfg.get("keep_bundles", False))
     per_seed: list[pd.DataFrame] = []
@@ -559,6 +565,7 @@ def run_comparison(
         seeds_df = pd.concat(per_seed, ignore_index=True)
         seeds_df.to_csv(folder / "seeds.csv", index=False)
         lat = {e: np.concatenate(v) for e, v in pooled.items() if v}
+        lat = {e: v for e, v in lat.items() if len(v)}  # a bundle may reach no decision
         df = seed_table(seeds_df, lat, primary)
         for est, c in costs.items():
             if est in lat and c.exported:
