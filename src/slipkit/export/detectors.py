@@ -1029,7 +1029,15 @@ def _fsr_gate_margin(
         press_i = np.full(len(inst), np.nan)
         ok = blk < len(press_b)
         press_i[ok] = press_b[blk[ok]]
-        return np.abs(press_i - float(spec["delta"])), 0.0
+        # the graph reads sign * (v - rest) in float32: a block mean can move by half
+        # a float32 step of the largest |v - rest| (no rest gap: the rest is the same)
+        head = x[: int(detector.rest_samples), 0]
+        finite = head[np.isfinite(head)]
+        dev = np.abs(x[:, 0] - np.mean(finite)) if finite.size else np.zeros(1)
+        top = float(np.max(dev[np.isfinite(dev)], initial=0.0))
+        return np.abs(press_i - float(spec["delta"])), float(
+            np.spacing(np.float32(min(top, _F32_MAX)))
+        )
     sig = detector._signal(x[:, 0])
     head = sig[: int(detector.rest_samples)]
     finite = head[np.isfinite(head)]
