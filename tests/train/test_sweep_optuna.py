@@ -178,6 +178,27 @@ def test_a_worker_of_another_sweep_is_refused(tmp_path: Path) -> None:
     assert [] == study.get_trials()
 
 
+def test_a_worker_whose_runs_give_no_score_stops(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Trials without a finite validation score fail; three in a row stop the worker."""
+    from hydra import compose, initialize_config_dir
+    from optuna.trial import TrialState
+
+    import slipkit.train.commands as commands
+    from slipkit import config_dir
+    from slipkit.train.optuna_sweep import sweep_main
+
+    monkeypatch.setattr(commands, "train_main", lambda cfg: float("nan"))
+    out = tmp_path / "sweep"
+    given = [*TINY, "search=tactip_svm", "n_trials=5", f"out={out}"]
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        cfg = compose(config_name="sweep", overrides=given)
+        with pytest.raises(SlipkitError, match=r"trials \[0, 1, 2\] in a row gave no"):
+            sweep_main(cfg, given)
+    assert [TrialState.FAIL] * 3 == [t.state for t in _trials(out)]
+
+
 def test_search_space_is_read_from_config() -> None:
     """configs/search/tactip_svm.yaml, with a command-line change, becomes the study's space."""
     from hydra import compose, initialize_config_dir

@@ -74,6 +74,8 @@ SWEEP_KEYS = frozenset(
 )
 #: tries at opening a storage that other workers may be creating at the same moment
 _OPEN_ATTEMPTS = 5
+#: a worker stops after this many of its trials in a row gave no finite objective
+MAX_FAILED_IN_A_ROW = 3
 #: user attribute ``host:pid`` of the worker running a trial, set at its first heartbeat
 WORKER = "worker"
 #: user attribute of a trial that was asked for but not run (the study was full)
@@ -447,6 +449,10 @@ class _NotRun(Exception):
     """A trial asked for after the study had its trials (another worker was faster)."""
 
 
+class _NoScore(Exception):
+    """A trial's run gave no finite objective (the trial fails, the study goes on)."""
+
+
 def _held(study: Any, trial: Any) -> int:
     """Trials that count against ``n_trials`` before ``trial``: every complete one,
     and every running or queued one with a lower number. Trial numbers are handed out
@@ -627,6 +633,7 @@ def sweep_main(
     print(f"study {name} ({shown_url(url)}): worker {host}:{os.getpid()} joined")
 
     study_id = storage.get_study_id_from_name(name)
+    failed: list[int] = []  # this worker's trials in a row without a finite score
 
     def objective(trial: Any) -> float:
         # The first heartbeat now, not when Optuna's heartbeat thread gets to it: from
@@ -650,6 +657,10 @@ def sweep_main(
         value = float(train_main(train_cfg))
         trial.set_user_attr("objective", obj.name)
         trial.set_user_attr("validation_score", value)
+        if not math.isfinite(value):
+            failed.append(trial.number)
+            raise _NoScore(f"{obj.name} = {value} (run folder {run_dir})")
+        failed.clear()
         return value
 
     poll_s = max(0.2, min(float(cfg.heartbeat_s), 5.0))
@@ -672,13 +683,20 @@ def sweep_main(
         waiting_said = False
         try:
             study.optimize(
-                objective, n_trials=1, catch=(_NotRun,), gc_after_trial=False
+                objective, n_trials=1, catch=(_NotRun, _NoScore), gc_after_trial=False
             )
         except optuna.exceptions.UpdateFinishedTrialError as exc:
             # Another worker took this live trial for dead (no heartbeat for grace_s:
             # a stalled machine or network) and queued its parameters again; the
             # retry counts, this result stays in its run folder only.
             log.warning("a trial was failed by another worker meanwhile: %s", exc)
+        if len(failed) >= MAX_FAILED_IN_A_ROW:
+            # Optuna fails a trial without a finite value and goes on; a config whose
+            # every run scores NaN would go on for ever.
+            raise SlipkitError(
+                f"study {name}: trials {failed} in a row gave no finite {obj.name}; "
+                f"see their train.log under {out / TRIALS_DIR}"
+            )
 
     for line in best_lines(study, obj, url):
         print(line)
