@@ -27,8 +27,9 @@ from slipkit.errors import DatasetError
 def _save_small_groups(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, **kwargs: int
 ) -> Path:
-    """A dataset written with 128-row row groups, so a trial spans several of them."""
-    monkeypatch.setattr(dio, "ROW_GROUP_ROWS", 128)
+    """A dataset written with row groups of 1024 rows (the least), so a trial spans
+    several of them."""
+    monkeypatch.setattr(dio, "ROW_GROUP_VALUES", 1)
     return save_dataset(make_dataset(**kwargs), tmp_path / "ds")
 
 
@@ -42,19 +43,20 @@ def _rewrite(path: Path, rel: str, df: pd.DataFrame, row_group_size: int) -> Non
 def test_save_writes_row_groups_of_the_set_size(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """A 1800-row stream written with 128-row groups has 15 row groups."""
-    path = _save_small_groups(tmp_path, monkeypatch, n_trials=6, n_frames=300)
-    assert 15 == pq.ParquetFile(path / "streams" / "force.parquet").num_row_groups
+    """A 3000-row stream written with 1024-row groups has 3 row groups."""
+    path = _save_small_groups(tmp_path, monkeypatch, n_trials=10, n_frames=300)
+    assert 3 == pq.ParquetFile(path / "streams" / "force.parquet").num_row_groups
 
 
 def test_chunks_hold_every_trial_once_with_its_rows(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """Chunks of about 700 rows cover the trials in order, each trial's rows whole."""
-    path = _save_small_groups(tmp_path, monkeypatch, n_trials=6, n_frames=300)
+    """Chunks of about 4000 values (800 force rows) cover the trials in order, each
+    trial's rows whole."""
+    path = _save_small_groups(tmp_path, monkeypatch, n_trials=10, n_frames=300)
     whole = load_dataset(path)
-    chunks = list(dio.iter_dataset_chunks(path, max_rows=700))
-    assert 1 < len(chunks)
+    chunks = list(dio.iter_dataset_chunks(path, max_values=4000))
+    assert 3 < len(chunks)
     assert whole.trial_ids == [t for c in chunks for t in c.trial_ids]
     for name, table in whole.tables.items():
         joined = pd.concat([c.tables[name] for c in chunks], ignore_index=True)
@@ -65,10 +67,10 @@ def test_folder_summary_equals_the_in_memory_summary(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """summary_of_folder read in small chunks gives summary_dict of the loaded dataset."""
-    path = _save_small_groups(tmp_path, monkeypatch, n_trials=7, n_frames=250)
+    path = _save_small_groups(tmp_path, monkeypatch, n_trials=9, n_frames=250)
     whole = load_dataset(path)
     expected = summary_dict(whole)
-    actual = summary_of_folder(path, max_rows=300)
+    actual = summary_of_folder(path, max_values=2000)
     assert expected == actual
     assert summarize(whole) == format_summary(actual)
 
@@ -84,7 +86,7 @@ def test_chunked_read_refuses_a_trial_split_across_the_file(tmp_path: Path) -> N
     )
     _rewrite(path, "streams/force.parquet", moved, row_group_size=50)
     with pytest.raises(DatasetError, match=r"force\.parquet.*not contiguous"):
-        summary_of_folder(path, max_rows=100)
+        summary_of_folder(path, max_values=500)
 
 
 def test_chunked_read_refuses_rows_of_unknown_trials(tmp_path: Path) -> None:
@@ -96,7 +98,7 @@ def test_chunked_read_refuses_rows_of_unknown_trials(tmp_path: Path) -> None:
         path, "streams/force.parquet", pd.concat([force, stray]), row_group_size=64
     )
     with pytest.raises(DatasetError, match=r"force\.parquet.*not in trials.*ghost"):
-        list(dio.iter_dataset_chunks(path, max_rows=100))
+        list(dio.iter_dataset_chunks(path, max_values=500))
 
 
 def test_chunked_read_refuses_a_channel_never_finite_over_all_chunks(
@@ -109,7 +111,7 @@ def test_chunked_read_refuses_a_channel_never_finite_over_all_chunks(
     with pytest.raises(
         DatasetError, match=r"column 'fy' has no finite value in its 400"
     ):
-        summary_of_folder(path, max_rows=100)
+        summary_of_folder(path, max_values=500)
     with pytest.raises(
         DatasetError, match=r"column 'fy' has no finite value in its 400"
     ):
@@ -123,4 +125,4 @@ def test_chunked_read_runs_the_dataset_checks_per_chunk(tmp_path: Path) -> None:
     force.loc[250, "t"] = -1.0  # inside trial-002
     _rewrite(path, "streams/force.parquet", force, row_group_size=64)
     with pytest.raises(DatasetError, match=r"force\.parquet.*'t' decreases"):
-        summary_of_folder(path, max_rows=100)
+        summary_of_folder(path, max_values=500)

@@ -30,10 +30,12 @@ from slipkit.errors import DatasetError
 
 MANIFEST = "manifest.json"
 TRIALS = "trials.parquet"
-#: Rows per Parquet row group in the files :func:`save_dataset` writes.
-ROW_GROUP_ROWS = 65_536
-#: Rows (summed over streams) a chunk of :func:`iter_dataset_chunks` aims at.
-CHUNK_ROWS = 262_144
+#: Values (rows x columns) per Parquet row group in the files :func:`save_dataset`
+#: writes: 8 MB of float64, whatever the channel count.
+ROW_GROUP_VALUES = 1_048_576
+#: Stream values (rows x columns, summed over streams) a chunk of
+#: :func:`iter_dataset_chunks` aims at: 8 MB of float64.
+CHUNK_VALUES = 1_048_576
 
 
 def stream_file(name: str) -> str:
@@ -44,14 +46,15 @@ def stream_file(name: str) -> str:
 def _write_parquet(df: pd.DataFrame, path: Path) -> None:
     # zstd keeps float channels small; the writer is deterministic for a given
     # pyarrow version, so one seed gives byte-identical files. Row groups of
-    # ROW_GROUP_ROWS rows let a reader take a few trials at a time
+    # about ROW_GROUP_VALUES values let a reader take a few trials at a time
     # (iter_dataset_chunks) instead of decompressing a whole stream.
+    rows = max(1024, ROW_GROUP_VALUES // max(1, len(df.columns)))
     df.to_parquet(
         path,
         index=False,
         compression="zstd",
         engine="pyarrow",
-        row_group_size=ROW_GROUP_ROWS,
+        row_group_size=rows,
     )
 
 
@@ -340,16 +343,16 @@ def _scan_trial_rows(
 
 
 def iter_dataset_chunks(
-    path: Path | str, *, verify: bool = True, max_rows: int = CHUNK_ROWS
+    path: Path | str, *, verify: bool = True, max_values: int = CHUNK_VALUES
 ) -> Iterator[Dataset]:
     """The dataset folder as consecutive :class:`Dataset` chunks of whole trials.
 
     Runs every check of :func:`load_dataset` (the manifest, files and trials table
     first; each chunk through :class:`Dataset`; trial ids, contiguity and channels
     that never hold a number over the whole file), but holds only about
-    ``max_rows`` stream rows at a time: each chunk reads only the Parquet row groups
-    of its trials (:data:`ROW_GROUP_ROWS` rows each in files written by
-    :func:`save_dataset`; a file written as one row group is read whole per chunk).
+    ``max_values`` stream values at a time: each chunk reads only the Parquet row
+    groups of its trials (about :data:`ROW_GROUP_VALUES` values each in files written
+    by :func:`save_dataset`; a file written as one row group is read whole per chunk).
     For a task that needs one trial at a time (``slipkit info``, summaries).
 
     Parameters
@@ -358,9 +361,9 @@ def iter_dataset_chunks(
         The dataset folder.
     verify : bool
         Check every file's sha256 against the manifest first.
-    max_rows : int
-        Stream rows (summed over streams) a chunk aims at; a chunk holds at least
-        one trial, so one longer trial makes a larger chunk.
+    max_values : int
+        Stream values (rows x columns, summed over streams) a chunk aims at; a chunk
+        holds at least one trial, so one longer trial makes a larger chunk.
 
     Yields
     ------
@@ -392,6 +395,7 @@ def iter_dataset_chunks(
                 str(file),
                 f"column 'trial_id' names trials not in trials.parquet: {sorted(unknown)[:5]}",
             )
+    width = {s: 2 + len(spec.channels) for s, spec in specs.items()}  # + trial_id, t
     finite = {s: dict.fromkeys(specs[s].channels, False) for s in specs}
     total = dict.fromkeys(specs, 0)
     common = {
@@ -432,8 +436,8 @@ def iter_dataset_chunks(
 
     first, n = 0, 0
     for i, tid in enumerate(ids):
-        n += sum(r.get(tid, 0) for r in rows.values())
-        if n >= max_rows:
+        n += sum(r.get(tid, 0) * width[s] for s, r in rows.items())
+        if n >= max_values:
             yield chunk(first, i + 1)
             first, n = i + 1, 0
     if first < len(ids):

@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 
 from slipkit.data.dataset import Dataset
-from slipkit.data.io import CHUNK_ROWS, iter_dataset_chunks
+from slipkit.data.io import CHUNK_VALUES, iter_dataset_chunks
 
 
 def _spans(table: pd.DataFrame) -> pd.Series:
@@ -37,18 +37,18 @@ def summary_dict(dataset: Dataset) -> dict[str, Any]:
 
 
 def summary_of_folder(
-    path: Path | str, *, verify: bool = True, max_rows: int = CHUNK_ROWS
+    path: Path | str, *, verify: bool = True, max_values: int = CHUNK_VALUES
 ) -> dict[str, Any]:
     """:func:`summary_dict` of the dataset folder ``path``, read a chunk of trials at a time.
 
     Every check of :func:`slipkit.data.io.load_dataset` runs; the peak memory is that of
-    one chunk (about ``max_rows`` stream rows) plus one number per trial.
+    one chunk (about ``max_values`` stream values) plus one number per trial.
     """
     trials: list[pd.DataFrame] = []
     rows: dict[str, int] = {}
     spans: dict[str, list[pd.Series]] = {}
     last: Dataset | None = None
-    for part in iter_dataset_chunks(path, verify=verify, max_rows=max_rows):
+    for part in iter_dataset_chunks(path, verify=verify, max_values=max_values):
         trials.append(part.trials)
         for name, table in part.tables.items():
             rows[name] = rows.get(name, 0) + len(table)

@@ -1,0 +1,103 @@
+"""A 4-job multirun with the joblib launcher on 2 workers against the same multirun in sequence.
+
+Both are the real command, ``slipkit train -m experiment=tactip_svm model.C=...`` (a TacTip
+SVM grid of four jobs on the simulated gravity drop), started as a subprocess: once with
+Hydra's basic launcher (one job after another, in the launching process) and once with
+``hydra/launcher=joblib hydra.launcher.n_jobs=2`` (two loky worker processes). Each job is
+held to one thread (``OMP_NUM_THREADS=1`` and friends) in both, so the ratio measures
+job parallelism, not BLAS threads. Printed: wall time of each, the ratio parallel /
+sequential (issue 17 target: at most 0.6 on 2 cores), and the CPU seconds the children
+used. One run each; the machine's other load shows in the numbers.
+
+    .venv/bin/python benchmarks/bench_launcher.py     # 4 jobs: 48 trials, 6-trial search
+    .venv/bin/python benchmarks/bench_launcher.py --trials 24 --search 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+GRID = "model.C=1,10,100,1000"  # four jobs
+
+
+def run_multirun(
+    out: Path, trials: int, search: int, launcher: list[str]
+) -> tuple[float, float]:
+    """Wall seconds and child CPU seconds of one ``slipkit train -m`` over :data:`GRID`."""
+    env = dict(os.environ)
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        env[var] = "1"
+    cmd = [
+        sys.executable,
+        "-c",
+        "from slipkit.cli import main; main()",
+        "train",
+        "-m",
+        "experiment=tactip_svm",
+        GRID,
+        f"dataset.n_trials={trials}",
+        f"task.search.n_trials={search}",
+        f"runs_dir={out / 'runs'}",
+        f"hydra.sweep.dir={out / 'multirun'}",
+        *launcher,
+    ]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    done = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
+    wall = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if done.returncode != 0:
+        sys.exit(f"bench_launcher: multirun failed:\n{done.stderr[-3000:]}")
+    n_runs = len(list((out / "runs" / "tactip_svm").iterdir()))
+    if n_runs != 4:
+        sys.exit(f"bench_launcher: expected 4 run folders, found {n_runs}")
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return wall, cpu
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--trials", type=int, default=48, help="simulated trials per job"
+    )
+    parser.add_argument(
+        "--search",
+        type=int,
+        default=6,
+        help="in-run Optuna trials per job (3-fold CV each): the work of one job",
+    )
+    parser.add_argument("--n-jobs", type=int, default=2, help="joblib workers")
+    args = parser.parse_args()
+    print(
+        f"4-job multirun (experiment=tactip_svm {GRID}, dataset.n_trials={args.trials} "
+        f"task.search.n_trials={args.search}); "
+        f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} at start"
+    )
+    with tempfile.TemporaryDirectory(prefix="bench-launcher-") as tmp:
+        seq_wall, seq_cpu = run_multirun(
+            Path(tmp) / "seq", args.trials, args.search, []
+        )
+        par_wall, par_cpu = run_multirun(
+            Path(tmp) / "par",
+            args.trials,
+            args.search,
+            ["hydra/launcher=joblib", f"hydra.launcher.n_jobs={args.n_jobs}"],
+        )
+    print(f"{'launcher':<22} {'wall s':>8} {'CPU s':>8}")
+    print(f"{'basic (sequential)':<22} {seq_wall:>8.1f} {seq_cpu:>8.1f}")
+    print(f"{f'joblib n_jobs={args.n_jobs}':<22} {par_wall:>8.1f} {par_cpu:>8.1f}")
+    ratio = par_wall / seq_wall
+    verdict = "meets" if ratio <= 0.6 else "misses"
+    print(f"ratio joblib / sequential: {ratio:.2f}x ({verdict} the 0.6x target)")
+    print(f"load average at end: {os.getloadavg()[0]:.1f}")
+
+
+if __name__ == "__main__":
+    main()
