@@ -243,3 +243,68 @@ def _kw(**extra: Any) -> dict[str, Any]:
         "interpolate",
     )
     return {**{k: PARAMS[k] for k in keys}, **extra}
+
+
+def test_incremental_bundle_loop_decides_as_the_batch_estimator(tmp_path: Any) -> None:
+    """slipkit export regression.incremental=true -> a bundle with the sliding_spectrum step whose loop decisions equal the batch estimator's."""
+    import json
+
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+
+    from slipkit import config_dir
+    from slipkit.export.commands import export_main
+    from slipkit.runtime import StreamLoop, load_bundle
+    from slipkit.train.commands import train_main
+    from slipkit.train.runs import read_run
+
+    def cfg(name: str, overrides: list[str]) -> Any:
+        with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+            out = compose(config_name=name, overrides=overrides)
+        GlobalHydra.instance().clear()
+        return out
+
+    run, out = tmp_path / "run", tmp_path / "bundle"
+    train_main(
+        cfg(
+            "train",
+            [
+                "experiment=sliptack_speed",
+                "dataset.n_trials=6",
+                f"detector.window={W}",
+                f"run_dir={run}",
+            ],
+        )
+    )
+    export_main(
+        cfg(
+            "export",
+            [
+                f"run={run}",
+                f"out={out}",
+                "choose_session=false",
+                "regression.threshold=10.0",
+                "regression.incremental=true",
+            ],
+        )
+    )
+    raw = json.loads((out / "manifest.json").read_text())
+    replay = np.load(out / "replay.npz")
+    frames, times = replay["frames"], replay["timestamps"]
+    loop = StreamLoop(load_bundle(out))
+    for values, ts in zip(frames, times, strict=True):
+        loop.step(values, float(ts))
+    res = loop.result()
+    est = read_run(run).model["*"]
+    ref = SpeedSlipDetector(speed=est, threshold=10.0).fit().decision_function(frames)
+    ref = ref[res.frame]
+    assert ["sliding_spectrum", [1, W // 2 + 1], 1.0] == [
+        raw["preprocessing"][0]["op"],
+        raw["inputs"][0]["shape"],
+        raw["training"]["parity"]["agreement"],
+    ]
+    np.testing.assert_array_equal(ref >= 10.0, res.slip)
+    finite = np.isfinite(ref)
+    # the graph reads the power spectrum as float32: the peak interpolation's log
+    # powers carry its rounding (the whole-window graph's MatMuls are float32 too)
+    np.testing.assert_allclose(res.score[finite], ref[finite], rtol=1e-5)

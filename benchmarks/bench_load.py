@@ -1,0 +1,254 @@
+"""Deadlines under load: each family's bundle replayed with and without a competing CPU-bound process, real-time options off and on.
+
+Run: ``.venv/bin/python benchmarks/bench_load.py [--frames 6000] [--core 0] [--keep DIR]
+[--families tactip,fsr,biotac,sliptack,sliptack_full,davis]``.
+
+1. Small bundles are made in a temp folder (or ``--keep``) with ``slipkit train``'s and
+   ``slipkit export``'s own functions (:mod:`slipkit.closedloop.commands`: few trials,
+   ``choose_session=false``): ``tactip`` (``experiment=tactip_svm``), ``fsr``
+   (``fsr_roc``), ``biotac`` (``biotac_force``: the force regressor, slip where a force exceeds 0 N), ``sliptack`` (``sliptack_speed``,
+   the 1000-sample window, speed >= 10 mm/s, ``regression.incremental=true``: the
+   spectrum per hop by the runtime op ``sliding_spectrum``) and ``sliptack_full`` (the
+   same run with the default ``regression.incremental=false``: the whole-window
+   graph), ``davis``
+   (``davis_release``, the ``davis_areas`` op).
+2. Each bundle's ``replay.npz`` (its first ``--frames`` frames, unpaced) runs through
+   ``slipkit-run`` in a fresh process under four conditions, in this order per bundle:
+   ``quiet`` / ``load`` (a busy-looping Python process pinned to ``--core``, started
+   before and killed after) x ``options off`` (no real-time option) / ``on``
+   (``--cpus <core> --realtime``: that core, SCHED_FIFO priority 10, GC frozen, one
+   onnxruntime thread). With the options on, the loop shares its core with the
+   competitor and outranks it.
+3. Prints one row per bundle and condition: decisions, p50 / p99 / max latency (ms,
+   frame arrival to decision) against the bundle's p99 budget (10 % of its frame
+   period), decisions over the budget, and whether p99 is within it; then any
+   real-time note (e.g. SCHED_FIFO not permitted).
+4. With both SlipTack bundles: the two side by side in this process, rounds
+   interleaved, the loop latency split into the numpy preprocessing and the graph
+   call (:func:`sliptack_pair`).
+
+The machine is shared (other jobs run on its cores too), so "quiet" is the machine as
+it is; the difference between rows of one bundle is the point.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+#: name -> (training run name, train overrides, export overrides)
+FAMILIES: dict[str, tuple[str, list[str], list[str]]] = {
+    "tactip": ("tactip", ["experiment=tactip_svm", "dataset.n_trials=8"], []),
+    "fsr": ("fsr", ["experiment=fsr_roc", "dataset.n_trials=8"], []),
+    "biotac": ("biotac", ["experiment=biotac_force", "dataset.n_trials=4"], []),
+    "sliptack": (
+        "sliptack",
+        ["experiment=sliptack_speed", "dataset.n_trials=6"],
+        ["regression.threshold=10.0", "regression.incremental=true"],
+    ),
+    "sliptack_full": (
+        "sliptack",
+        ["experiment=sliptack_speed", "dataset.n_trials=6"],
+        ["regression.threshold=10.0", "regression.incremental=false"],
+    ),
+    "davis": ("davis", ["experiment=davis_release", "dataset.n_trials=6"], []),
+}
+
+BUSY = "import os, sys; os.sched_setaffinity(0, {int(sys.argv[1])})\nwhile True: pass"
+
+
+def build(root: Path, names: list[str]) -> dict[str, Path]:
+    """Train (once per run name) and export each family's bundle under ``root``."""
+    from slipkit.closedloop.commands import export_bundle, train_run
+
+    runs: dict[str, Path] = {}
+    out: dict[str, Path] = {}
+    for name in names:
+        run_name, train_over, export_over = FAMILIES[name]
+        bundle = root / "bundles" / name
+        if bundle.exists():
+            out[name] = bundle
+            continue
+        if run_name not in runs:
+            run_dir = root / "runs" / run_name
+            if not run_dir.exists():
+                run_dir.parent.mkdir(parents=True, exist_ok=True)
+                t0 = time.perf_counter()
+                spec = {
+                    "experiment": train_over[0].split("=", 1)[1],
+                    "overrides": train_over[2:],
+                }
+                n = int(train_over[1].split("=", 1)[1])
+                train_run(spec, n, 0, run_dir)
+                print(
+                    f"trained {run_name} in {time.perf_counter() - t0:.0f} s",
+                    flush=True,
+                )
+            runs[run_name] = run_dir
+        bundle.parent.mkdir(parents=True, exist_ok=True)
+        export_bundle(
+            runs[run_name], bundle, 1, ["replay_max_frames=20000", *export_over]
+        )
+        out[name] = bundle
+    return out
+
+
+def run_one(
+    bundle: Path, frames: int, core: int, load: bool, options: bool
+) -> dict[str, Any]:
+    """One ``slipkit-run`` replay in a fresh process; its --json summary."""
+    with tempfile.TemporaryDirectory() as tmp:
+        js = Path(tmp) / "out.json"
+        cmd = [
+            sys.executable,
+            "-m",
+            "slipkit.runtime.cli",
+            str(bundle),
+            "--frames",
+            str(frames),
+            "--json",
+            str(js),
+        ]
+        if options:
+            cmd += ["--cpus", str(core), "--realtime"]
+        busy = None
+        if load:
+            busy = subprocess.Popen([sys.executable, "-c", BUSY, str(core)])
+            time.sleep(0.3)  # let it reach its core
+        try:
+            proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+        finally:
+            if busy is not None:
+                busy.kill()
+                busy.wait()
+        if proc.returncode not in (0, 1) or not js.exists():
+            raise SystemExit(f"{' '.join(cmd)} failed: {proc.stderr.strip()}")
+        out = json.loads(js.read_text())
+        out["notes"] = [ln for ln in proc.stderr.splitlines() if "note:" in ln]
+        return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    ap.add_argument("--frames", type=int, default=6000)
+    ap.add_argument("--core", type=int, default=0)
+    ap.add_argument(
+        "--keep", type=Path, help="make (or reuse) the bundles in this folder"
+    )
+    ap.add_argument("--families", default=",".join(FAMILIES))
+    ap.add_argument(
+        "--rounds", type=int, default=3, help="SlipTack side-by-side rounds (default 3)"
+    )
+    args = ap.parse_args()
+    names = [n for n in args.families.split(",") if n]
+    unknown = sorted(set(names) - set(FAMILIES))
+    if unknown:
+        raise SystemExit(
+            f"--families: unknown {unknown}; choose from {sorted(FAMILIES)}"
+        )
+    from hydra import initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+
+    from slipkit import config_dir
+
+    with tempfile.TemporaryDirectory() as tmp:
+        root = args.keep or Path(tmp)
+        with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+            bundles = build(root, names)
+        GlobalHydra.instance().clear()
+        print(
+            f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}; competitor and "
+            f"--cpus on core {args.core}; {args.frames} frames per run, unpaced; ms"
+        )
+        head = (
+            f"| {'bundle':13s} | budget | load  | options | decisions | p50    | p99    "
+            f"| max    | over budget | p99 within |"
+        )
+        print(head)
+        print("|" + "|".join("-" * (len(c)) for c in head.split("|")[1:-1]) + "|")
+        notes: set[str] = set()
+        for name in names:
+            for load in (False, True):
+                for options in (False, True):
+                    s = run_one(bundles[name], args.frames, args.core, load, options)
+                    lat = s["latency_ms"] or {}
+                    notes.update(s["notes"])
+                    print(
+                        f"| {name:13s} | {s['budget_ms']['p99']:.4f} "
+                        f"| {'load' if load else 'quiet':5s} | {'on' if options else 'off':7s} "
+                        f"| {s['decisions']:9d} | {lat.get('p50', float('nan')):.4f} "
+                        f"| {lat.get('p99', float('nan')):.4f} | {lat.get('max', float('nan')):.4f} "
+                        f"| {s['over_budget']:11d} | {'yes' if s['within_budget'] else 'NO':10s} |",
+                        flush=True,
+                    )
+        for note in sorted(notes):
+            print(note)
+        if {"sliptack", "sliptack_full"} <= set(names):
+            sliptack_pair(bundles["sliptack"], bundles["sliptack_full"], args.rounds)
+
+
+def _pct(ns: list[int]) -> str:
+    import numpy as np
+
+    a = np.asarray(ns, dtype=np.float64) / 1e3
+    return f"{np.percentile(a, 50):8.1f} {np.percentile(a, 99):8.1f}"
+
+
+def sliptack_pair(inc: Path, full: Path, rounds: int) -> None:
+    """SlipTack's incremental and whole-window bundles side by side in this process.
+
+    Rounds interleaved (incremental, then whole-window, ``rounds`` times) over the
+    same replay frames; per decision: the loop (frame arrival -> decision), and its
+    parts timed on the same windows: the numpy preprocessing alone and the graph call
+    alone (``session.run`` on the precomputed input). us, pooled over rounds.
+    """
+    import numpy as np
+
+    from slipkit.runtime import ReplaySource, StreamLoop, load_bundle
+
+    b_inc, b_full = load_bundle(inc), load_bundle(full)
+    rep = np.load(inc / "replay.npz")
+    frames, times = rep["frames"], rep["timestamps"]
+    res: dict[str, dict[str, list[int]]] = {
+        k: {"loop": [], "prep": [], "graph": []} for k in ("incremental", "whole")
+    }
+    for _ in range(rounds):
+        for key, b in (("incremental", b_inc), ("whole", b_full)):
+            loop = StreamLoop(b)
+            r = loop.run(ReplaySource(frames, times))
+            res[key]["loop"] += r.latency_ns.tolist()
+            w, hop = b.manifest.frame.window, b.manifest.frame.hop
+            (inp,) = b.manifest.inputs
+            pipe = b.preprocessing
+            for op in pipe.ops:
+                getattr(op, "reset", lambda: None)()
+            name, out = inp.name, b.manifest.decision.output
+            for end in range(w - 1, len(frames), hop):
+                x = np.asarray(frames[end - w + 1 : end + 1], dtype=np.float64)
+                t0 = time.perf_counter_ns()
+                y = pipe(x)
+                t1 = time.perf_counter_ns()
+                feed = {name: np.asarray(y, dtype=np.float32).reshape(inp.shape)}
+                t2 = time.perf_counter_ns()
+                b.session.run([out], feed)
+                t3 = time.perf_counter_ns()
+                res[key]["prep"].append(t1 - t0)
+                res[key]["graph"].append(t3 - t2)
+    print(
+        f"SlipTack side by side ({rounds} rounds interleaved, {len(frames)} replay "
+        "frames; us, p50 p99; budget 100 us)"
+    )
+    print(f"{'graph':12s} {'loop':>17s} {'numpy prep':>17s} {'graph call':>17s}")
+    for key, r in res.items():
+        print(f"{key:12s} {_pct(r['loop'])} {_pct(r['prep'])} {_pct(r['graph'])}")
+
+
+if __name__ == "__main__":
+    main()
