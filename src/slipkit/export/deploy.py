@@ -837,22 +837,42 @@ def _deploy_detection(
     positive = str(options.get("positive") or classes[-1])
     export_options: dict[str, Any] = {}
     notes = []
+    deployed = None
+    held = trial_frames(dataset, test_ids, stream, channels)
     from slipkit.baselines.biotac import PressureVibration
 
     if isinstance(run.model, PressureVibration) and run.model.baseline is None:
         # The batch detector measures its baseline per recording; the graph needs a
         # fixed one: the median over the training recordings (the exporter's helper).
-        from slipkit.export.detectors import pressure_baseline
+        # The graph then computes the detector with that fixed baseline, so parity
+        # checks it against that detector (issue 16: against the per-recording one the
+        # scores differ by the ratio of the baselines, not by rounding), and the note
+        # states how often it decides as the trained detector on the held-out trials.
+        from slipkit.export.detectors import (
+            baseline_agreement,
+            pressure_baseline,
+            with_fixed_baseline,
+        )
 
         train = [t for t in dataset.trial_ids if str(t) not in set(map(str, test_ids))]
         rec = trial_frames(dataset, train, stream, channels)
         X = np.concatenate([r.frames for r in rec])
         seg = np.concatenate([np.full(len(r.frames), k) for k, r in enumerate(rec)])
         base = pressure_baseline(run.model, X, segments=seg)
-        export_options["baseline"] = base
+        deployed = with_fixed_baseline(run.model, base)
+        agree, n = baseline_agreement(
+            run.model,
+            deployed,
+            np.concatenate([r.frames for r in held]),
+            segments=np.concatenate(
+                [np.full(len(r.frames), k) for k, r in enumerate(held)]
+            ),
+        )
         notes.append(
             f"fixed pressure baseline {base:.4g} counts RMS (median of the training "
-            "recordings; the batch detector measures one per recording)"
+            "recordings; the trained detector measures one per recording): the bundle "
+            f"deploys PressureVibration(baseline={base:.4g}), which decides as the "
+            f"trained detector on {100 * agree:.2f} % of {n} held-out samples"
         )
     steps: list[dict[str, Any]] = []
     from slipkit.baselines.fsr import FSRTouchSlip
@@ -882,7 +902,8 @@ def _deploy_detection(
         export_options=export_options,
         positive=positive,
         debounce_k=int(options.get("debounce_k") or 1),
-        trials=trial_frames(dataset, test_ids, stream, channels),
+        trials=held,
+        model=deployed,
         notes=[
             f"raw samples of {stream!r} ({', '.join(channels)}) at {rate:g} Hz; the graph "
             f"holds {type(run.model).__name__}'s math on a window of the last samples",

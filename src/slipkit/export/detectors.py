@@ -63,6 +63,7 @@ the graph, as its batch form (``numpy.nan_to_num``) does.
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass, replace
 from typing import Any
@@ -741,6 +742,76 @@ def pressure_baseline(
     return max(float(np.median(bases)), float(detector.baseline_floor))
 
 
+def with_fixed_baseline(
+    detector: PressureVibration, baseline: float
+) -> PressureVibration:
+    """The fitted detector with a fixed ``baseline``: the detector a graph deploys.
+
+    A detector trained with ``baseline=None`` divides by each recording's own baseline;
+    its graph divides by one constant (:func:`pressure_baseline` of the training
+    recordings), so on a recording whose baseline differs the two scores differ by the
+    ratio of the baselines (a few % on the simulated lift), not by rounding. Parity is
+    a property of the graph and the detector it computes, so the deployer checks the
+    graph against this copy and states separately how often it decides as the trained
+    detector (:func:`baseline_agreement`).
+
+    Parameters
+    ----------
+    detector : PressureVibration
+        Fitted. Its ``threshold_`` (``k``) is kept as trained, not re-chosen.
+    baseline : float
+        The fixed baseline (counts RMS).
+
+    Returns
+    -------
+    PressureVibration
+        A deep copy with ``baseline`` set; every fitted attribute as the original.
+    """
+    check_is_fitted(detector, "threshold_")
+    if not (math.isfinite(float(baseline)) and float(baseline) > 0):
+        raise ExportError(
+            f"baseline must be a positive number of counts; got {baseline!r}"
+        )
+    out = copy.deepcopy(detector)
+    out.baseline = float(baseline)
+    return out
+
+
+def baseline_agreement(
+    trained: PressureVibration,
+    deployed: PressureVibration,
+    X: ArrayLike,
+    *,
+    segments: ArrayLike | None = None,
+) -> tuple[float, int]:
+    """How often the deployed (fixed-baseline) detector decides as the trained one.
+
+    Parameters
+    ----------
+    trained, deployed : PressureVibration
+        Fitted; typically ``deployed = with_fixed_baseline(trained, b)``.
+    X : array_like (n_samples, 1)
+        Recordings (AC pressure, counts) in time order, e.g. the held-out ones.
+    segments : array_like (n_samples,), optional
+        Recording id of every sample.
+
+    Returns
+    -------
+    agreement : float
+        Fraction of the samples where both detectors decide (finite scores) with the
+        same decision; 1.0 when there are none.
+    n_samples : int
+        Those samples.
+    """
+    a = trained.decision_function(X, segments=segments)
+    b = deployed.decision_function(X, segments=segments)
+    both = np.isfinite(a) & np.isfinite(b)
+    if not both.any():
+        return 1.0, 0
+    same = (a[both] >= trained.threshold_) == (b[both] >= deployed.threshold_)
+    return float(np.mean(same)), int(both.sum())
+
+
 def _band_matrix(g: GraphBuilder, v: str, m: NDArray[np.float64]) -> str:
     # One MatMul: ~W x n_out multiply-adds, one BLAS call in onnxruntime.
     return g.op("MatMul", v, g.const(m, np.float64), stem="band")
@@ -1322,6 +1393,7 @@ __all__ = [
     "DEFAULT_TAIL_TOL",
     "NO_SCORE",
     "DetectorGraph",
+    "baseline_agreement",
     "check_detector_parity",
     "detector_windows",
     "export_force_derivative",
@@ -1332,6 +1404,7 @@ __all__ = [
     "graph_scores",
     "pressure_baseline",
     "steady_state_fir",
+    "with_fixed_baseline",
 ]
 
 if __name__ == "__main__":
