@@ -417,10 +417,6 @@ def check_estimators(comp: dict[str, Any], cfg: DictConfig) -> None:
             )
 
 
-#: replay frames each seed times at least (when ``cost.max_frames`` is split over seeds)
-MIN_SEED_FRAMES = 300
-
-
 def comparison_seeds(cfg: DictConfig, comp: dict[str, Any]) -> list[int]:
     """The seeds a comparison runs: ``seeds=`` (command line), else the comparison's
     ``seeds:``, else the one ``seed``.
@@ -507,13 +503,6 @@ def run_comparison(
     limits = verdict_limits(comp.get("verdict"), "comparison.verdict")
     analytic = [str(a) for a in comp.get("analytic") or []]
     cost_cfg = _container(cfg.get("cost") or OmegaConf.create({}))
-    # cost.max_frames is the timed frames per estimator over all seeds: each seed times
-    # its share (at least MIN_SEED_FRAMES, so a long window still reaches a decision),
-    # so seeds add spread, not timing cost
-    total = int(cost_cfg.get("max_frames", 2000))
-    cost_cfg["max_frames"] = max(
-        min(total, MIN_SEED_FRAMES), math.ceil(total / len(seeds))
-    )
     keep = bool(cost_cfg.get("keep_bundles", False))
     per_seed: list[pd.DataFrame] = []
     evals: dict[str, Evaluation] = {}
