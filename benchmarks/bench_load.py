@@ -205,14 +205,16 @@ def sliptack_pair(inc: Path, full: Path, rounds: int) -> None:
     """SlipTack's incremental and whole-window bundles side by side in this process.
 
     Rounds interleaved (incremental, then whole-window, ``rounds`` times) over the
-    same replay frames; per decision: the loop (frame arrival -> decision), and its
+    same replay frames, numpy's OpenBLAS on one thread (as ``--pin-threads``); per decision: the loop (frame arrival -> decision), and its
     parts timed on the same windows: the numpy preprocessing alone and the graph call
     alone (``session.run`` on the precomputed input). us, pooled over rounds.
     """
     import numpy as np
 
     from slipkit.runtime import ReplaySource, StreamLoop, load_bundle
+    from slipkit.runtime.realtime import blas_threads
 
+    blas_threads(1)  # as --pin-threads: numpy's BLAS on one thread
     b_inc, b_full = load_bundle(inc), load_bundle(full)
     rep = np.load(inc / "replay.npz")
     frames, times = rep["frames"], rep["timestamps"]

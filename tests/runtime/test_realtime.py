@@ -20,6 +20,7 @@ from slipkit.runtime.errors import OptionError
 from slipkit.runtime.realtime import (
     RealtimeOptions,
     apply_realtime,
+    blas_threads,
     frozen_gc,
     options_from_text,
     parse_cpus,
@@ -214,3 +215,14 @@ def test_cli_bad_cpus_is_one_line_exit_2(
     assert 2 == exc.value.code
     assert 1 == len(err)
     assert err[0].startswith("slipkit-run: error: --cpus")
+
+
+def test_blas_threads_sets_and_reports_openblas_threads() -> None:
+    """blas_threads(1) leaves numpy's OpenBLAS on one thread (and reports it); the old count is restored after."""
+    before = blas_threads()
+    if before is None:
+        pytest.skip("numpy is not linked to OpenBLAS here")
+    try:
+        assert (1, 1) == (blas_threads(1), blas_threads())
+    finally:
+        blas_threads(before)
