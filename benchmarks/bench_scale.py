@@ -10,10 +10,10 @@ own (``os.wait4`` rusage, ``ru_maxrss``):
 
 Then ``slipkit import`` throughput through the generic CSV importer (one CSV per trial
 written from the 16x TacTip folder), and the TacTip SVM's super-linear fit time beside a
-kernel approximation (scikit-learn ``Nystroem`` features + a linear SVM; the
+kernel approximation (scikit-learn ``Nystroem`` features + a logistic regression; the
 ``tactip_nystroem`` model config) on the same frames, with balanced accuracy on held-out
-trials. Peak memory includes the interpreter and its imports (the ``import only`` row
-gives that floor per command); the ratio 16x / 1x is the issue-17 target (at most 2 for
+trials. Peak memory includes the interpreter and its imports (the import-only floors
+printed first); the ratio 16x / 1x is the issue-17 target (at most 2 for
 ``info`` and for a window model's training). One run; other load on the machine shows.
 
     .venv/bin/python benchmarks/bench_scale.py                   # all families, a few minutes
@@ -64,9 +64,8 @@ def slipkit(args: list[str], log: Path) -> tuple[float, float]:
     return wall, usage.ru_maxrss / 1024.0  # Linux: kB
 
 
-def floor_mb(log: Path) -> float:
-    """Peak RSS (MB) of a process that only imports what ``slipkit train`` imports."""
-    code = "import slipkit.cli, slipkit.train.commands, slipkit.sim.commands, torch"
+def floor_mb(code: str) -> float:
+    """Peak RSS (MB) of a process that only runs ``code`` (imports)."""
     proc = subprocess.Popen([sys.executable, "-c", code], env={**os.environ, **THREADS})
     _, _, usage = os.wait4(proc.pid, 0)
     return usage.ru_maxrss / 1024.0
@@ -176,7 +175,7 @@ def import_throughput(folder: Path, tmp: Path) -> dict[str, float]:
 
 
 def svm_vs_nystroem(base_trials: int, seed: int = 0) -> list[dict[str, float | str]]:
-    """Fit time and held-out balanced accuracy of the RBF SVM and Nystroem + linear SVM."""
+    """Fit time and held-out balanced accuracy of the RBF SVM and Nystroem + linear model."""
     from hydra.utils import instantiate
     from omegaconf import OmegaConf
     from sklearn.metrics import balanced_accuracy_score
@@ -234,7 +233,12 @@ def main() -> None:
     result: dict[str, object] = {}
     with tempfile.TemporaryDirectory(prefix="bench-scale-") as tmp_name:
         tmp = Path(tmp_name)
-        floor = floor_mb(tmp / "floor.log")
+        floor = {
+            "info": floor_mb(
+                "import slipkit.cli, slipkit.data.commands, pyarrow.parquet"
+            ),
+            "train": floor_mb("import slipkit.cli, slipkit.train.commands, torch"),
+        }
         rows = []
         for name in args.families:
             rows.extend(family_rows(name, tmp))
@@ -246,16 +250,19 @@ def main() -> None:
     nys = svm_vs_nystroem(args.svm_trials)
     result = {"floor_mb": floor, "families": rows, "import": imp, "svm": nys}
 
-    print(f"\nimport-only floor (slipkit + torch imported): {floor:.0f} MB peak RSS")
     print(
-        "| family | scale | trials | rows | simulate rows/s | info s | info MB | "
-        "train s | train MB |"
+        f"\nimport-only floors (peak RSS): info's imports {floor['info']:.0f} MB, "
+        f"train's with torch {floor['train']:.0f} MB"
     )
-    print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
+    print(
+        "| family | scale | trials | rows | simulate s | simulate rows/s | info s | "
+        "info MB | train s | train MB |"
+    )
+    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|")
     for r in rows:
         print(
             f"| {r['family']} | {r['scale']} | {r['trials']} | {r['rows']} | "
-            f"{r['simulate_rows_per_s']:.0f} | {r['info_s']:.1f} | {r['info_mb']:.0f} | "
+            f"{r['simulate_s']:.1f} | {r['simulate_rows_per_s']:.0f} | {r['info_s']:.1f} | {r['info_mb']:.0f} | "
             f"{r['train_s']:.1f} | {r['train_mb']:.0f} |"
         )
     print("\npeak memory 16x / 1x (target <= 2 for info and window training):")
