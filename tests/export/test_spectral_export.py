@@ -143,6 +143,43 @@ def test_slip_detector_decides_as_the_batch_rule(data: Data) -> None:
     ]
 
 
+def test_twiddle_dft_is_numpys_rfft() -> None:
+    """The two-GEMM twiddle DFT's power equals |numpy.fft.rfft|^2 at every bin (float64)."""
+    from slipkit.export.spectral import twiddle_dft_matrices
+
+    w = 1000
+    x = np.random.default_rng(3).normal(0.0, 1.0, (2, w))
+    f1, t, w2, n1, k2 = twiddle_dft_matrices(w)
+    a = (f1 @ x.reshape(2, n1, w // n1)).reshape(2, n1, 2, 1, w // n1) * t
+    y = (a.reshape(-1, 4 * (w // n1)) @ w2).reshape(2, n1, 2, k2)
+    power = (y**2).sum(axis=2).reshape(2, -1)
+    ks = (np.arange(n1)[:, None] + n1 * np.arange(k2)[None, :]).reshape(-1)
+    pos = np.argsort(ks)[: w // 2 + 1]
+    expected = np.abs(np.fft.rfft(x, axis=1)) ** 2
+    np.testing.assert_allclose(power[:, pos], expected, rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("dft_dtype", ["float32", "float64"])
+def test_shared_dft_graph_speeds_equal_the_separate_dfts(
+    data: Data, dft_dtype: str
+) -> None:
+    """One DFT for f_d and the features: the same speeds as two DFTs, NaN windows included."""
+    est = _fit(data, "gbr")
+    x = np.concatenate(data.held_out)
+    x[700] = np.nan  # windows holding a NaN: f_d NaN -> 0, the sample -> 0
+    speeds, flags = [], []
+    for shared in (False, True):
+        graph = export_spectral_speed(est, dft_dtype=dft_dtype, shared_dft=shared)
+        windows, inst = detector_windows(graph, x)
+        out = onnx_session(graph).run([graph.score_output], {"window": windows})[0]
+        speeds.append(graph_speeds(out))
+        flags.append(graph.features["shared_dft"])  # type: ignore[index]
+    expected = est.predict(x)[inst]
+    assert [False, True] == flags
+    assert np.abs(speeds[1] - speeds[0]).max() <= 1e-4
+    assert np.abs(speeds[1] - expected).max() <= 1e-3
+
+
 def test_analytic_estimator_is_refused() -> None:
     """export_spectral_speed names the class it needs when given the analytic estimator."""
     with pytest.warns(FixedNormalForceWarning):

@@ -57,6 +57,7 @@ from numpy.typing import ArrayLike, NDArray
 from onnx import compose, helper
 from sklearn.utils.validation import check_is_fitted
 
+from slipkit.baselines.sliptack import StickSlipSpeed
 from slipkit.export._graph import DOUBLE, FLOAT, GraphBuilder
 from slipkit.export.detectors import SCORE, WINDOW_INPUT, DetectorGraph
 from slipkit.export.registry import (
@@ -68,7 +69,15 @@ from slipkit.export.registry import (
     producers,
     register_exporter,
 )
-from slipkit.export.sliptack import SpeedSlipDetector, _frequency, dft_matrices
+from slipkit.export.sliptack import (
+    SpeedSlipDetector,
+    _factor,
+    _frequency,
+    _peak_frequency,
+    _reduce,
+    _slice,
+    dft_matrices,
+)
 from slipkit.models.spectral import SpectralSpeedRegressor
 
 FloatArray = NDArray[np.float64]
@@ -140,10 +149,104 @@ def _power(g: GraphBuilder, xw: str, w: int, dft_dtype: str) -> str:
     return g.op("Gather", power, g.const(pos, np.int64), axis=1, stem="power")
 
 
+def twiddle_dft_matrices(
+    nfft: int,
+) -> tuple[FloatArray, FloatArray, FloatArray, int, int]:
+    """Constants of a real DFT of length ``nfft`` in two GEMMs and one twiddle product.
+
+    Cooley-Tukey with ``nfft = N1 N2`` (:func:`slipkit.export.sliptack.dft_matrices`'s
+    factors) and the signal reshaped row-major to ``X[n1, n2] = x[N2 n1 + n2]``:
+
+    1. ``A = F1 @ X``, ``F1`` of shape ``(2 N1, N1)`` with rows interleaved per
+       ``k1`` (row ``2 k1`` the cosines of ``2 pi n1 k1 / N1``, row ``2 k1 + 1`` the
+       negative sines), so ``A`` reshapes to ``(N1, 2, N2)``: (re, im) per ``k1``;
+    2. the twiddle ``exp(-2 pi i n2 k1 / nfft)`` as one broadcast product with ``T``
+       ``(N1, 2, 2, N2)``: per ``k1`` the row ``[re c, re s, im s, im c]`` (``c, s``
+       the twiddle's cosine and sine), length ``4 N2``;
+    3. ``Y = Z @ W2`` with ``W2 = [M1; -M2; M1; M2]`` ``(4 N2, 2 K2)``, ``M1 = [Gc,
+       Gs]``, ``M2 = [-Gs, Gc]`` the length-``N2`` DFT ``exp(-2 pi i n2 k2 / N2) = Gc +
+       i Gs``: ``[Y_re, Y_im]`` of bin ``k1 + N1 k2``, ``k2 < K2``.
+
+    Against :func:`~slipkit.export.sliptack.dft_matrices` (a separate ``(2 N2, 2 K2)``
+    block per ``k1``, i.e. ``4 N1`` GEMMs of one row per window), step 3 is one GEMM of
+    ``N1`` rows per window: the same products, far fewer calls.
+
+    Returns
+    -------
+    F1 : ndarray (2 N1, N1)
+    T : ndarray (N1, 2, 2, N2)
+    W2 : ndarray (4 N2, 2 K2)
+    n1, k2 : int
+        ``N1`` and ``K2``.
+    """
+    n1, n2 = _factor(int(nfft))
+    k1 = np.arange(n1)
+    a1 = 2.0 * np.pi * np.outer(k1, k1) / n1
+    f1 = np.stack([np.cos(a1), -np.sin(a1)], axis=1).reshape(2 * n1, n1)
+    th = 2.0 * np.pi * np.outer(k1, np.arange(n2)) / nfft  # (N1, N2)
+    c, s = np.cos(th), np.sin(th)
+    t = np.stack([np.stack([c, s], axis=1), np.stack([s, c], axis=1)], axis=1)
+    k2n = (nfft // 2) // n1 + 1
+    ang = -2.0 * np.pi * np.outer(np.arange(n2), np.arange(k2n)) / n2
+    gc, gs = np.cos(ang), np.sin(ang)
+    m1 = np.concatenate([gc, gs], axis=1)
+    m2 = np.concatenate([-gs, gc], axis=1)
+    return f1, t, np.concatenate([m1, -m2, m1, m2]), n1, k2n
+
+
+def _twiddle_power(g: GraphBuilder, xw: str, nfft: int, dt: Any) -> str:
+    """Power spectra ``(B, N1 K2)`` in ``dt`` of the rows ``xw`` ``(B, nfft)`` (already
+    in ``dt``), bin ``k1 + N1 k2`` at ``k1 K2 + k2`` (as ``sliptack._frequency``)."""
+    f1, t, w2, n1, k2n = twiddle_dft_matrices(nfft)
+    n2 = nfft // n1
+    i64 = np.int64
+    grid = g.op("Reshape", xw, g.const([-1, n1, n2], i64), stem="grid")
+    a = g.op("MatMul", g.const(f1, dt), grid, stem="stage1")  # (B, 2 N1, N2)
+    a = g.op("Reshape", a, g.const([-1, n1, 2, 1, n2], i64))
+    z = g.op("Mul", a, g.const(t, dt), stem="twiddled")  # (B, N1, 2, 2, N2)
+    z = g.op("Reshape", z, g.const([-1, 4 * n2], i64))
+    y = g.op("MatMul", z, g.const(w2, dt), stem="stage2")  # (B N1, 2 K2)
+    y = g.op("Reshape", y, g.const([-1, n1, 2, k2n], i64))
+    power = _reduce(g, "ReduceSumSquare", y, (2,), 0)  # (B, N1, K2)
+    return g.op("Reshape", power, g.const([-1, n1 * k2n], i64), stem="power")
+
+
+def _ma_windowed(g: GraphBuilder, x: str, physics: StickSlipSpeed) -> str:
+    """The analytic estimator's detrended, tapered window (``sliptack._frequency``'s
+    first two steps, the same nodes): ``x - x[0]`` minus its edge-padded moving
+    average over ``detrend_frames``, times the Hamming window; NaN stays NaN."""
+    w = int(physics.window)
+    s = min(int(physics.detrend_frames), w)
+    xc = g.op("Sub", x, _slice(g, x, 0, 1, 1), stem="xc")
+    left = s // 2
+    pads = g.const([0, left, 0, s - left], np.int64)
+    padded = g.op("Pad", xc, pads, mode="edge", stem="padded")
+    cs0 = g.op("CumSum", padded, g.const(1, np.int64), exclusive=1, stem="cs0")
+    diff = g.op("Sub", _slice(g, cs0, s, s + w, 1), _slice(g, cs0, 0, w, 1))
+    trend = g.op("Div", diff, g.const(float(s), np.float64), stem="trend")
+    resid = g.op("Sub", xc, trend, stem="resid")
+    return g.op("Mul", resid, g.const(np.hamming(w), np.float64), stem="windowed_fd")
+
+
+def _shares_dft(est: SpectralSpeedRegressor) -> bool:
+    """Whether the ``f_d`` spectrum has the feature spectrum's length (no zero padding)."""
+    phys = est.physics_
+    return int(phys.window) == int(est.window) and int(phys.pad_factor) == 1
+
+
 def _feature_graph(
-    est: SpectralSpeedRegressor, opset: int, dft_dtype: str
+    est: SpectralSpeedRegressor,
+    opset: int,
+    dft_dtype: str,
+    shared_dft: bool = True,
 ) -> onnx.ModelProto:
-    """Windows ``(batch, W, 1)`` float32 -> the regressor's features ``(batch, F)`` float32."""
+    """Windows ``(batch, W, 1)`` float32 -> the regressor's features ``(batch, F)`` float32.
+
+    ``shared_dft``: both spectra (``f_d``'s and the features') through one DFT
+    (:func:`twiddle_dft_matrices`, the two tapered windows stacked); False: each its own
+    DFT (``sliptack._frequency`` for ``f_d``, :func:`_power` for the features), the
+    graph before issue 16's cost fix, kept for the side-by-side benchmark.
+    """
     w, rate = int(est.window), float(est.rate_hz)
     n_bands, n_peaks = int(est.n_bands), int(est.n_peaks)
     g = GraphBuilder("spectral_features", opset)
@@ -154,11 +257,7 @@ def _feature_graph(
         stem="x",
     )
     zero = g.const(0.0, np.float64)
-    # 1. f_d of the internal analytic estimator (NaN -> 0, as the batch features)
-    fd = _frequency(g, x, est.physics_, dft_dtype)
-    fd = g.op("Where", g.op("IsNaN", fd), zero, fd)
-    fd = g.op("Unsqueeze", fd, g.const([1], np.int64), stem="f_d")
-    # 2. spectrum: non-finite -> 0, linear detrend, Hamming, DFT
+    # spectrum of the features: non-finite -> 0, linear detrend, Hamming
     bad = g.op("IsNaN", g.op("Sub", x, x))  # NaN exactly for NaN and +-inf
     xf = g.op("Where", bad, zero, x)
     q = _linear_detrend_basis(w)
@@ -171,7 +270,39 @@ def _feature_graph(
         g.op("MatMul", coef, g.const(q.T * taper[None, :], np.float64)),
         stem="windowed",
     )
-    power = _power(g, xw, w, dft_dtype)  # (b, W // 2 + 1)
+    if shared_dft and _shares_dft(est):
+        # 1.+2. one DFT of both tapered windows, f_d's (moving-average detrend, NaN
+        # kept: every bin NaN, f_d NaN, as the batch estimator) and the features'
+        # (each row of the stacked GEMMs is its own window: no mixing)
+        dt = np.float32 if dft_dtype == "float32" else np.float64
+        i64 = np.int64
+        both = g.op(
+            "Concat",
+            g.op("Unsqueeze", _ma_windowed(g, x, est.physics_), g.const([1], i64)),
+            g.op("Unsqueeze", xw, g.const([1], i64)),
+            axis=1,
+        )  # (b, 2, W)
+        if dt is np.float32:
+            both = g.op("Cast", both, to=FLOAT)
+        pw = _twiddle_power(g, g.op("Reshape", both, g.const([-1, w], i64)), w, dt)
+        n1 = int(_factor(w)[0])
+        k2n = (w // 2) // n1 + 1
+        pw = g.op("Reshape", pw, g.const([-1, 2, n1 * k2n], i64))
+        ks = (np.arange(n1)[:, None] + n1 * np.arange(k2n)[None, :]).reshape(-1)
+        pos = np.argsort(ks)[: w // 2 + 1]  # pos[k]: where bin k sits
+        p_fd = g.op("Gather", pw, g.const(0, i64), axis=1, stem="power_fd")
+        fd = _peak_frequency(g, p_fd, pos, n1 * k2n, est.physics_, dt)
+        p_ft = g.op("Gather", pw, g.const(1, i64), axis=1)
+        if dt is np.float32:
+            p_ft = g.op("Cast", p_ft, to=DOUBLE)
+        power = g.op("Gather", p_ft, g.const(pos, i64), axis=1, stem="power")
+    else:
+        # 1. f_d of the internal analytic estimator by the analytic graph's nodes
+        fd = _frequency(g, x, est.physics_, dft_dtype)
+        # 2. the features' DFT
+        power = _power(g, xw, w, dft_dtype)  # (b, W // 2 + 1)
+    fd = g.op("Where", g.op("IsNaN", fd), zero, fd)  # NaN -> 0, as the batch features
+    fd = g.op("Unsqueeze", fd, g.const([1], np.int64), stem="f_d")
     parts = []
     if n_bands:
         # 3. log relative band powers
@@ -273,6 +404,7 @@ def export_spectral_speed(
     *,
     threshold: float | None = None,
     dft_dtype: str = "float32",
+    shared_dft: bool = True,
     opset: int = DEFAULT_OPSET,
 ) -> DetectorGraph:
     """Export a fitted :class:`SpectralSpeedRegressor` over a window of ``window`` nib samples.
@@ -286,6 +418,9 @@ def export_spectral_speed(
         ``("0", "1")``. None: a regression graph without decision.
     dft_dtype : {"float32", "float64"}
         Precision of the DFT products (the f_d and the feature spectrum).
+    shared_dft : bool
+        One DFT for both spectra (:func:`twiddle_dft_matrices`; the default, issue
+        16's cost fix); False: each spectrum its own DFT (the graph before it).
     opset : int
         Default-domain opset (17 or 18).
 
@@ -314,7 +449,7 @@ def export_spectral_speed(
     w = int(estimator.window)
     n1 = int(dft_matrices(w)[2])
     model = compose.merge_models(
-        _feature_graph(estimator, opset, dft_dtype),
+        _feature_graph(estimator, opset, dft_dtype, shared_dft),
         _regressor_graph(estimator, opset),
         io_map=[(_FEATURES, _FEATURES)],
     )
@@ -348,6 +483,7 @@ def export_spectral_speed(
             "n_peaks": int(estimator.n_peaks),
             "dft_factors": [n1, w // n1],
             "dft_dtype": dft_dtype,
+            "shared_dft": bool(shared_dft and _shares_dft(estimator)),
         },
         producers=producers(
             scipy=scipy.__version__,
@@ -387,6 +523,7 @@ def export_spectral_slip_detector(
     detector: SpectralSlipDetector,
     *,
     dft_dtype: str = "float32",
+    shared_dft: bool = True,
     opset: int = DEFAULT_OPSET,
 ) -> DetectorGraph:
     """Export a fitted :class:`SpectralSlipDetector`: the speed graph with its threshold."""
@@ -395,6 +532,7 @@ def export_spectral_slip_detector(
         detector.speed,
         threshold=detector.threshold_,
         dft_dtype=dft_dtype,
+        shared_dft=shared_dft,
         opset=opset,
     )
 
