@@ -1,0 +1,194 @@
+"""Cost of the learned SlipTack speed graph (``spectral_gbr``), before and after sharing one DFT.
+
+Run: ``.venv/bin/python benchmarks/bench_spectral_export.py [--run RUN] [--trials N]
+[--blocks B] [--calls C] [--realtime]``.
+
+Without ``--run`` it first trains the comparison's ``spectral_gbr``
+(``configs/comparison/sliptack.yaml``: the hard pull, ``N`` = 12 trials, seed 0,
+``configs/model/sliptack_spectral_gbr.yaml``) into a temporary run folder, ~1-2 min.
+Then, from the run's ``"*"`` estimator (the one ``slipkit export`` deploys):
+
+* **graphs** - ``export_spectral_speed(est, shared_dft=False)`` (before: the analytic
+  ``f_d`` graph's own DFT and a second one for the features) and ``shared_dft=True``
+  (after: both tapered windows through one two-GEMM DFT), and, as the floor, the
+  analytic ``f_d`` nodes alone (``sliptack._frequency``: every graph above holds them);
+* **inputs** - the float32 windows the runtime feeds at every call on the run's held-out
+  trials (the export deployer's ``trials``, :func:`detector_windows`);
+* **time** - batch-1 ``InferenceSession.run`` on one onnxruntime thread
+  (:func:`onnx_session`), the graphs interleaved in blocks of ``C`` calls (``B``
+  blocks) so that they share the machine's load; p50 / p99 per graph in us. With
+  ``--realtime`` the timing runs as ``slipkit-run --realtime`` does (SCHED_FIFO where
+  permitted, GC frozen; :mod:`slipkit.runtime.realtime`), else at normal priority;
+* **same predictions** - max |speed| difference of each graph against
+  ``SpectralSpeedRegressor.predict`` at the same calls, and before vs after (mm/s).
+
+Nothing is tuned on these numbers; the table is quoted in ``docs/export.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from hydra import compose, initialize_config_dir
+from hydra.core.global_hydra import GlobalHydra
+from onnx import helper
+
+from slipkit import config_dir
+from slipkit.export._graph import DOUBLE, FLOAT, GraphBuilder
+from slipkit.export.detectors import detector_windows
+from slipkit.export.parity import onnx_session
+from slipkit.export.registry import ExportedGraph
+from slipkit.export.sliptack import _frequency
+from slipkit.export.spectral import export_spectral_speed, graph_speeds
+from slipkit.runtime.realtime import RealtimeOptions, apply_realtime, frozen_gc
+
+
+def _compose(name: str, overrides: list[str]) -> Any:
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        cfg = compose(config_name=name, overrides=overrides)
+    GlobalHydra.instance().clear()
+    return cfg
+
+
+def train(run_dir: Path, trials: int) -> Path:
+    """The comparison's spectral_gbr on the hard pull (``trials`` trials, seed 0)."""
+    from slipkit.train.commands import train_main
+
+    train_main(
+        _compose(
+            "train",
+            [
+                "experiment=sliptack_speed",
+                "~detector",
+                "model=sliptack_spectral_gbr",
+                "scene=sliptack_pull_hard",
+                f"dataset.n_trials={trials}",
+                f"run_dir={run_dir}",
+            ],
+        )
+    )
+    return run_dir
+
+
+def held_out(run_dir: Path) -> tuple[Any, list[np.ndarray]]:
+    """The deployed ``"*"`` estimator and the held-out trials' nib samples."""
+    from slipkit.export.deploy import deployment
+    from slipkit.train.commands import build
+    from slipkit.train.data import training_dataset
+    from slipkit.train.runs import read_run
+
+    run = read_run(run_dir)
+    dep = deployment(
+        build(run.config.task, "task"),
+        run,
+        training_dataset(run.config),
+        {"regression": {"threshold": 0.0}},
+    )
+    return dep.model.speed, [np.asarray(t.frames, np.float64) for t in dep.trials]
+
+
+def fd_only(est: Any) -> ExportedGraph:
+    """The analytic ``f_d`` nodes alone (the part every spectral_gbr graph holds)."""
+    w = int(est.window)
+    g = GraphBuilder("f_d_only", 17)
+    x = g.op("Reshape", g.op("Cast", "window", to=DOUBLE), g.const([-1, w], np.int64))
+    fd = _frequency(g, x, est.physics_, "float32")
+    g.nodes.append(helper.make_node("Cast", [fd], ["score"], to=FLOAT))
+    model = g.build(
+        [helper.make_tensor_value_info("window", FLOAT, ["batch", w, 1])],
+        [helper.make_tensor_value_info("score", FLOAT, ["batch"])],
+        doc="f_d only",
+    )
+    return ExportedGraph(
+        model=model,
+        input_name="window",
+        input_shape=("batch", w, 1),
+        output_names=("score",),
+        score_output="score",
+        score_meaning="f_d (Hz)",
+        score_method="predict",
+        opset=17,
+    )
+
+
+def main() -> None:
+    """Train (or read) the run, build the graphs, time them interleaved, print the table."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--run", type=Path, default=None)
+    ap.add_argument("--trials", type=int, default=12)
+    ap.add_argument("--blocks", type=int, default=40)
+    ap.add_argument("--calls", type=int, default=250)
+    ap.add_argument("--realtime", action="store_true")
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        run_dir = args.run or train(Path(tmp) / "run", args.trials)
+        est, trials = held_out(run_dir)
+    graphs = {
+        "before (two DFTs)": export_spectral_speed(est, shared_dft=False),
+        "after (one shared DFT)": export_spectral_speed(est, shared_dft=True),
+        "f_d nodes alone (floor)": fd_only(est),
+    }
+    wins, expected = [], []
+    for x in trials:
+        w, inst = detector_windows(graphs["after (one shared DFT)"], x)  # type: ignore[arg-type]
+        wins.append(w)
+        expected.append(est.predict(x)[inst])
+    windows, ref = np.concatenate(wins), np.concatenate(expected)
+    sessions = {k: onnx_session(g) for k, g in graphs.items()}
+    speeds = {
+        k: graph_speeds(s.run(["score"], {"window": windows})[0])
+        for k, s in sessions.items()
+    }
+    times: dict[str, list[int]] = {k: [] for k in graphs}
+    opts = RealtimeOptions(
+        priority="fifo" if args.realtime else "normal",
+        freeze_gc=args.realtime,
+        pin_threads=args.realtime,
+    )
+    state = apply_realtime(opts)
+    with frozen_gc(opts.freeze_gc):
+        for b in range(args.blocks):
+            for k in graphs if b % 2 == 0 else reversed(list(graphs)):
+                sess = sessions[k]
+                for j in range(args.calls):
+                    feed = {
+                        "window": windows[(b * args.calls + j) % len(windows)][None]
+                    }
+                    t0 = time.perf_counter_ns()
+                    sess.run(["score"], feed)
+                    times[k].append(time.perf_counter_ns() - t0)
+    if args.realtime:  # back to normal before printing
+        apply_realtime(RealtimeOptions(priority="normal"))
+        if hasattr(os, "sched_setscheduler") and "priority" in state.applied:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    print(
+        f"spectral_gbr ({est.model}, window {est.window}, hop {est.hop}); "
+        f"{len(windows)} held-out calls from {len(trials)} trials; "
+        f"{args.blocks} x {args.calls} interleaved batch-1 calls per graph, 1 thread; "
+        f"real-time: {state.applied or 'none'} {'; '.join(state.notes)}"
+    )
+    before = speeds["before (two DFTs)"]
+    print(
+        f"{'graph':26s} {'nodes':>5s} {'p50 us':>7s} {'p99 us':>7s} "
+        f"{'max|speed - predict| mm/s':>26s}"
+    )
+    for k, g in graphs.items():
+        t = np.asarray(times[k]) / 1e3
+        diff = "-" if k.startswith("f_d") else f"{np.abs(speeds[k] - ref).max():.2e}"
+        print(
+            f"{k:26s} {len(g.model.graph.node):5d} {np.percentile(t, 50):7.1f} "
+            f"{np.percentile(t, 99):7.1f} {diff:>26s}"
+        )
+    after = speeds["after (one shared DFT)"]
+    print(f"max |after - before| speed: {np.abs(after - before).max():.2e} mm/s")
+
+
+if __name__ == "__main__":
+    main()
