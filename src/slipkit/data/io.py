@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from slipkit import __version__
@@ -48,7 +50,9 @@ def _write_parquet(df: pd.DataFrame, path: Path) -> None:
     # pyarrow version, so one seed gives byte-identical files. Row groups of
     # about ROW_GROUP_VALUES values let a reader take a few trials at a time
     # (iter_dataset_chunks) instead of decompressing a whole stream.
-    rows = max(1024, ROW_GROUP_VALUES // max(1, len(df.columns)))
+    # At most 65536 rows: a narrow table's trial_id strings would otherwise outweigh
+    # its values.
+    rows = min(65_536, max(1024, ROW_GROUP_VALUES // max(1, len(df.columns))))
     df.to_parquet(
         path,
         index=False,
@@ -321,14 +325,17 @@ def _scan_trial_rows(
     for rg in range(pf.num_row_groups):
         try:
             col = pf.read_row_group(rg, columns=["trial_id"]).column(0)
+            # dictionary codes: 4 bytes a row instead of a Python string a row
+            coded = pc.dictionary_encode(pc.cast(col, pa.string())).combine_chunks()
         except Exception as exc:  # pyarrow raises several types for corrupt files
             raise _parquet_error(file, exc) from exc
-        ids = col.to_pandas().astype(str).to_numpy()
-        if not len(ids):
+        codes = coded.indices.to_numpy(zero_copy_only=False)
+        if not len(codes):
             continue
-        starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
-        lengths = np.diff(np.r_[starts, len(ids)])
-        for tid, n in zip(ids[starts], lengths, strict=True):
+        names = np.asarray(coded.dictionary.to_pylist(), dtype=object)
+        starts = np.flatnonzero(np.r_[True, codes[1:] != codes[:-1]])
+        lengths = np.diff(np.r_[starts, len(codes)])
+        for tid, n in zip(names[codes[starts]], lengths, strict=True):
             if tid != last and tid in rows:
                 raise DatasetError(
                     str(file),
@@ -418,13 +425,16 @@ def iter_dataset_chunks(
             rgs = sorted({rg for tid in keep for rg in where[s].get(tid, ())})
             try:
                 table = (
-                    pf.read_row_groups(rgs).to_pandas()
-                    if rgs
-                    else pf.schema_arrow.empty_table().to_pandas()
+                    pf.read_row_groups(rgs) if rgs else pf.schema_arrow.empty_table()
                 )
+                # keep the chunk's rows in Arrow, before pandas makes a string per row
+                mask = pc.is_in(
+                    pc.cast(table["trial_id"], pa.string()),
+                    value_set=pa.array(sorted(keep), pa.string()),
+                )
+                tables[s] = table.filter(mask).to_pandas()
             except Exception as exc:  # pyarrow raises several types for corrupt files
                 raise _parquet_error(files[s], exc) from exc
-            tables[s] = table[table["trial_id"].astype(str).isin(keep)]
         part = Dataset(trials=trials.iloc[first:stop], tables=tables, **common)
         for s, table in part.tables.items():
             total[s] += len(table)
