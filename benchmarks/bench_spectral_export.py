@@ -1,7 +1,7 @@
 """Cost of the learned SlipTack speed graph (``spectral_gbr``), before and after sharing one DFT.
 
 Run: ``.venv/bin/python benchmarks/bench_spectral_export.py [--run RUN] [--trials N]
-[--blocks B] [--calls C] [--realtime]``.
+[--blocks B] [--calls C] [--realtime] [--no-fd-run RUN2]``.
 
 Without ``--run`` it first trains the comparison's ``spectral_gbr``
 (``configs/comparison/sliptack.yaml``: the hard pull, ``N`` = 12 trials, seed 0,
@@ -20,7 +20,12 @@ Then, from the run's ``"*"`` estimator (the one ``slipkit export`` deploys):
   ``--realtime`` the timing runs as ``slipkit-run --realtime`` does (SCHED_FIFO where
   permitted, GC frozen; :mod:`slipkit.runtime.realtime`), else at normal priority;
 * **same predictions** - max |speed| difference of each graph against
-  ``SpectralSpeedRegressor.predict`` at the same calls, and before vs after (mm/s).
+  ``SpectralSpeedRegressor.predict`` at the same calls, and before vs after (mm/s);
+* **a model change, optional** - ``--no-fd-run`` names a run of the same data trained
+  with ``+model.f_d_feature=false`` (no ``f_d`` feature): its graph is timed in the same
+  blocks (on its own held-out calls) and both runs' validation scores are printed
+  (``metrics.json``'s ``validation.overall``: group CV by trial on the training half;
+  the test half is not read).
 
 Nothing is tuned on these numbers; the table is quoted in ``docs/export.md``.
 """
@@ -28,6 +33,7 @@ Nothing is tuned on these numbers; the table is quoted in ``docs/export.md``.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import tempfile
 import time
@@ -94,6 +100,11 @@ def held_out(run_dir: Path) -> tuple[Any, list[np.ndarray]]:
     return dep.model.speed, [np.asarray(t.frames, np.float64) for t in dep.trials]
 
 
+def _validation(run_dir: Path) -> dict[str, Any]:
+    """The run's validation record (``metrics.json``; never its test half)."""
+    return dict(json.loads((Path(run_dir) / "metrics.json").read_text())["validation"])
+
+
 def fd_only(est: Any) -> ExportedGraph:
     """The analytic ``f_d`` nodes alone (the part every spectral_gbr graph holds)."""
     w = int(est.window)
@@ -126,10 +137,12 @@ def main() -> None:
     ap.add_argument("--blocks", type=int, default=40)
     ap.add_argument("--calls", type=int, default=250)
     ap.add_argument("--realtime", action="store_true")
+    ap.add_argument("--no-fd-run", type=Path, default=None)
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         run_dir = args.run or train(Path(tmp) / "run", args.trials)
         est, trials = held_out(run_dir)
+        validation = {"with f_d": _validation(run_dir)}
     graphs = {
         "before (two DFTs)": export_spectral_speed(est, shared_dft=False),
         "after (one shared DFT)": export_spectral_speed(est, shared_dft=True),
@@ -141,9 +154,22 @@ def main() -> None:
         wins.append(w)
         expected.append(est.predict(x)[inst])
     windows, ref = np.concatenate(wins), np.concatenate(expected)
+    inputs = dict.fromkeys(graphs, windows)
+    refs = dict.fromkeys(graphs, ref)
+    if args.no_fd_run is not None:
+        est2, trials2 = held_out(args.no_fd_run)
+        if getattr(est2, "f_d_feature", True):
+            raise SystemExit(f"{args.no_fd_run}: its model has the f_d feature")
+        key = "no f_d feature (model)"
+        graphs[key] = export_spectral_speed(est2)
+        w2 = [detector_windows(graphs[key], x) for x in trials2]  # type: ignore[arg-type]
+        inputs[key] = np.concatenate([w for w, _ in w2])
+        refs[key] = np.concatenate(
+            [est2.predict(x)[i] for x, (_, i) in zip(trials2, w2, strict=True)]
+        )
     sessions = {k: onnx_session(g) for k, g in graphs.items()}
     speeds = {
-        k: graph_speeds(s.run(["score"], {"window": windows})[0])
+        k: graph_speeds(s.run(["score"], {"window": inputs[k]})[0])
         for k, s in sessions.items()
     }
     times: dict[str, list[int]] = {k: [] for k in graphs}
@@ -157,10 +183,9 @@ def main() -> None:
         for b in range(args.blocks):
             for k in graphs if b % 2 == 0 else reversed(list(graphs)):
                 sess = sessions[k]
+                win = inputs[k]
                 for j in range(args.calls):
-                    feed = {
-                        "window": windows[(b * args.calls + j) % len(windows)][None]
-                    }
+                    feed = {"window": win[(b * args.calls + j) % len(win)][None]}
                     t0 = time.perf_counter_ns()
                     sess.run(["score"], feed)
                     times[k].append(time.perf_counter_ns() - t0)
@@ -181,13 +206,24 @@ def main() -> None:
     )
     for k, g in graphs.items():
         t = np.asarray(times[k]) / 1e3
-        diff = "-" if k.startswith("f_d") else f"{np.abs(speeds[k] - ref).max():.2e}"
+        diff = (
+            "-" if k.startswith("f_d") else f"{np.abs(speeds[k] - refs[k]).max():.2e}"
+        )
         print(
             f"{k:26s} {len(g.model.graph.node):5d} {np.percentile(t, 50):7.1f} "
             f"{np.percentile(t, 99):7.1f} {diff:>26s}"
         )
     after = speeds["after (one shared DFT)"]
     print(f"max |after - before| speed: {np.abs(after - before).max():.2e} mm/s")
+    if args.no_fd_run is not None:
+        print("validation (group CV by trial, training half), overall:")
+        validation["no f_d"] = _validation(args.no_fd_run)
+        for name, v in validation.items():
+            o = v["overall"]
+            print(
+                f"  {name:9s} MAE {o['mae_mm_s']:.2f} mm/s, RMSE {o['rmse_mm_s']:.2f} "
+                f"mm/s over {o['n_trials']:.0f} trials ({v['cv']}, k = {v['k']})"
+            )
 
 
 if __name__ == "__main__":

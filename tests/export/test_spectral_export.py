@@ -180,6 +180,24 @@ def test_shared_dft_graph_speeds_equal_the_separate_dfts(
     assert np.abs(speeds[1] - expected).max() <= 1e-3
 
 
+def test_graph_without_the_f_d_feature_scores_as_the_regressor(data: Data) -> None:
+    """f_d_feature=False: 19 features, no f_d nodes, the graph's speed is predict's."""
+    est = SpectralSpeedRegressor(
+        window=400, hop=50, max_iter=30, f_d_feature=False
+    ).fit(data.X, data.y, segments=data.seg)
+    graph = export_spectral_speed(est)
+    x = data.held_out[0]
+    windows, inst = detector_windows(graph, x)
+    out = onnx_session(graph).run([graph.score_output], {"window": windows})[0]
+    ops = {n.op_type for n in graph.model.graph.node}
+    assert [19, False, False] == [
+        est.features(x)[0].shape[1],
+        graph.features["f_d_feature"],  # type: ignore[index]
+        "CumSum" in ops,  # the f_d detrend and peak rule are CumSums
+    ]
+    assert np.abs(graph_speeds(out) - est.predict(x)[inst]).max() <= 1e-3
+
+
 def test_analytic_estimator_is_refused() -> None:
     """export_spectral_speed names the class it needs when given the analytic estimator."""
     with pytest.warns(FixedNormalForceWarning):

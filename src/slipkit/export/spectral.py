@@ -270,7 +270,23 @@ def _feature_graph(
         g.op("MatMul", coef, g.const(q.T * taper[None, :], np.float64)),
         stem="windowed",
     )
-    if shared_dft and _shares_dft(est):
+    use_fd = bool(getattr(est, "f_d_feature", True))  # runs saved before it: True
+    fd: str | None = None
+    if not use_fd:
+        # no f_d feature: the features' spectrum alone, by the two-GEMM DFT
+        dt = np.float32 if dft_dtype == "float32" else np.float64
+        if dt is np.float32:
+            xw = g.op("Cast", xw, to=FLOAT)
+        pw = _twiddle_power(g, xw, w, dt)
+        n1 = int(_factor(w)[0])
+        k2n = (w // 2) // n1 + 1
+        ks = (np.arange(n1)[:, None] + n1 * np.arange(k2n)[None, :]).reshape(-1)
+        if dt is np.float32:
+            pw = g.op("Cast", pw, to=DOUBLE)
+        power = g.op(
+            "Gather", pw, g.const(np.argsort(ks)[: w // 2 + 1], np.int64), axis=1
+        )
+    elif shared_dft and _shares_dft(est):
         # 1.+2. one DFT of both tapered windows, f_d's (moving-average detrend, NaN
         # kept: every bin NaN, f_d NaN, as the batch estimator) and the features'
         # (each row of the stacked GEMMs is its own window: no mixing)
@@ -301,8 +317,9 @@ def _feature_graph(
         fd = _frequency(g, x, est.physics_, dft_dtype)
         # 2. the features' DFT
         power = _power(g, xw, w, dft_dtype)  # (b, W // 2 + 1)
-    fd = g.op("Where", g.op("IsNaN", fd), zero, fd)  # NaN -> 0, as the batch features
-    fd = g.op("Unsqueeze", fd, g.const([1], np.int64), stem="f_d")
+    if fd is not None:
+        fd = g.op("Where", g.op("IsNaN", fd), zero, fd)  # NaN -> 0, as batch features
+        fd = g.op("Unsqueeze", fd, g.const([1], np.int64), stem="f_d")
     parts = []
     if n_bands:
         # 3. log relative band powers
@@ -361,14 +378,15 @@ def _feature_graph(
             pad = g.const([0, 0, 0, n_peaks - k], i64)
             peaks = g.op("Pad", peaks, pad)
         parts.append(peaks)
-    parts.append(fd)
+    if fd is not None:
+        parts.append(fd)
     feats = g.op("Concat", *parts, axis=1)
     g.nodes.append(helper.make_node("Cast", [feats], [_FEATURES], to=FLOAT))
     return g.build(
         [helper.make_tensor_value_info(WINDOW_INPUT, FLOAT, ["batch", w, 1])],
         [
             helper.make_tensor_value_info(
-                _FEATURES, FLOAT, ["batch", n_bands + n_peaks + 1]
+                _FEATURES, FLOAT, ["batch", n_bands + n_peaks + int(use_fd)]
             )
         ],
         doc="SlipTack window -> band powers, peak frequencies, f_d",
@@ -380,7 +398,7 @@ def _regressor_graph(est: SpectralSpeedRegressor, opset: int) -> onnx.ModelProto
     from skl2onnx import to_onnx
     from skl2onnx.common.data_types import FloatTensorType
 
-    n = int(est.n_bands) + int(est.n_peaks) + 1
+    n = int(est.n_bands) + int(est.n_peaks) + int(getattr(est, "f_d_feature", True))
     with _tree_bool_fix():
         model = to_onnx(
             est.regressor_,
@@ -484,6 +502,7 @@ def export_spectral_speed(
             "dft_factors": [n1, w // n1],
             "dft_dtype": dft_dtype,
             "shared_dft": bool(shared_dft and _shares_dft(estimator)),
+            "f_d_feature": bool(getattr(estimator, "f_d_feature", True)),
         },
         producers=producers(
             scipy=scipy.__version__,

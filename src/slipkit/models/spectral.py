@@ -8,7 +8,9 @@ power spectrum, reduced to
 
 * the log relative power in ``n_bands`` log-spaced bands over ``band_hz``,
 * the ``n_peaks`` strongest spectral peaks' frequencies (Hz, strongest first),
-* the analytic estimator's dominant frequency ``f_d`` (Hz) of the same window,
+* the analytic estimator's dominant frequency ``f_d`` (Hz) of the same window
+  (``f_d_feature=True``, the default; False leaves it out: its exported graph is then
+  about 40 % of the cost, ``benchmarks/bench_spectral_export.py``),
 
 and a regressor (``model``: ``"gbr"``, scikit-learn's histogram gradient boosting,
 seeded; or ``"ridge"`` on standardised features) maps them to the speed (mm/s). The
@@ -75,6 +77,9 @@ class SpectralSpeedRegressor(RegressorMixin, BaseEstimator):
         Seed of the boosting.
     mu_s, mu_k : float
         Friction of the internal analytic estimator (set per material by the task).
+    f_d_feature : bool
+        Whether ``f_d`` is a feature (the last column). The internal analytic
+        estimator is fitted either way (the task's diagnostics read it).
 
     Attributes
     ----------
@@ -97,6 +102,7 @@ class SpectralSpeedRegressor(RegressorMixin, BaseEstimator):
         "random_state": [Interval(Integral, 0, None, closed="left")],
         "mu_s": [Interval(Real, 0, None, closed="neither")],
         "mu_k": [Interval(Real, 0, None, closed="neither")],
+        "f_d_feature": ["boolean"],
     }
 
     def __init__(
@@ -114,6 +120,7 @@ class SpectralSpeedRegressor(RegressorMixin, BaseEstimator):
         random_state: int = 0,
         mu_s: float = 0.55,
         mu_k: float = 0.45,
+        f_d_feature: bool = True,
     ) -> None:
         self.rate_hz = rate_hz
         self.window = window
@@ -127,6 +134,7 @@ class SpectralSpeedRegressor(RegressorMixin, BaseEstimator):
         self.random_state = random_state
         self.mu_s = mu_s
         self.mu_k = mu_k
+        self.f_d_feature = f_d_feature
 
     # -- what the SlipTack task reads of its estimator ----------------------------------
     @property
@@ -196,7 +204,7 @@ class SpectralSpeedRegressor(RegressorMixin, BaseEstimator):
 
         Returns
         -------
-        F : ndarray of shape (n_windows, n_bands + n_peaks + 1)
+        F : ndarray of shape (n_windows, n_bands + n_peaks + f_d_feature)
         ends : ndarray of int, shape (n_windows,)
         """
         A = self._check(X)
@@ -206,7 +214,8 @@ class SpectralSpeedRegressor(RegressorMixin, BaseEstimator):
         edges = np.geomspace(lo, min(hi, rate / 2), int(self.n_bands) + 1)
         band = np.digitize(freqs, edges) - 1
         taper = np.hamming(w)
-        f_d = self.physics_.frequency(A[:, :1], segments=segments)
+        use_fd = bool(getattr(self, "f_d_feature", True))  # runs saved before it: True
+        f_d = self.physics_.frequency(A[:, :1], segments=segments) if use_fd else None
         rows, ends = [], []
         for a, b in segment_bounds(len(A), segments):
             x = A[a:b, 0]
@@ -228,11 +237,12 @@ class SpectralSpeedRegressor(RegressorMixin, BaseEstimator):
                     idx = idx[np.argsort(p[idx])[::-1][: int(self.n_peaks)]]
                     peaks[i, : len(idx)] = freqs[idx]
                 feats.append(peaks)
-            fd = f_d[a + end]
-            feats.append(np.where(np.isfinite(fd), fd, 0.0)[:, None])
+            if f_d is not None:
+                fd = f_d[a + end]
+                feats.append(np.where(np.isfinite(fd), fd, 0.0)[:, None])
             rows.append(np.concatenate(feats, axis=1))
             ends.append(a + end)
-        width = int(self.n_bands) + int(self.n_peaks) + 1
+        width = int(self.n_bands) + int(self.n_peaks) + int(use_fd)
         if not rows:
             return np.empty((0, width)), np.empty(0, dtype=np.int64)
         return np.concatenate(rows), np.concatenate(ends).astype(np.int64)
