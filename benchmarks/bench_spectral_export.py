@@ -3,10 +3,12 @@
 Run: ``.venv/bin/python benchmarks/bench_spectral_export.py [--run RUN] [--trials N]
 [--blocks B] [--calls C] [--realtime] [--no-fd-run RUN2]``.
 
-Without ``--run`` it first trains the comparison's ``spectral_gbr``
+Without ``--run`` / ``--no-fd-run`` it first trains the comparison's ``spectral_gbr``
 (``configs/comparison/sliptack.yaml``: the hard pull, ``N`` = 12 trials, seed 0,
-``configs/model/sliptack_spectral_gbr.yaml``) into a temporary run folder, ~1-2 min.
-Then, from the run's ``"*"`` estimator (the one ``slipkit export`` deploys):
+``configs/model/sliptack_spectral_gbr.yaml``) with the ``f_d`` feature
+(``model.f_d_feature=true``, the model before issue 16) and without it (the shipped
+config) into temporary run folders, ~1-2 min each. Then, from a run's ``"*"``
+estimator (the one ``slipkit export`` deploys):
 
 * **graphs** - ``export_spectral_speed(est, shared_dft=False)`` (before: the analytic
   ``f_d`` graph's own DFT and a second one for the features) and ``shared_dft=True``
@@ -21,9 +23,9 @@ Then, from the run's ``"*"`` estimator (the one ``slipkit export`` deploys):
   permitted, GC frozen; :mod:`slipkit.runtime.realtime`), else at normal priority;
 * **same predictions** - max |speed| difference of each graph against
   ``SpectralSpeedRegressor.predict`` at the same calls, and before vs after (mm/s);
-* **a model change, optional** - ``--no-fd-run`` names a run of the same data trained
-  with ``+model.f_d_feature=false`` (no ``f_d`` feature): its graph is timed in the same
-  blocks (on its own held-out calls) and both runs' validation scores are printed
+* **the model change** - the run without the ``f_d`` feature (``--no-fd-run``, trained
+  on the same data with ``model.f_d_feature=false``): its graph timed in the same
+  blocks (on its own held-out calls), and both runs' validation scores
   (``metrics.json``'s ``validation.overall``: group CV by trial on the training half;
   the test half is not read).
 
@@ -63,8 +65,9 @@ def _compose(name: str, overrides: list[str]) -> Any:
     return cfg
 
 
-def train(run_dir: Path, trials: int) -> Path:
-    """The comparison's spectral_gbr on the hard pull (``trials`` trials, seed 0)."""
+def train(run_dir: Path, trials: int, f_d: bool) -> Path:
+    """The comparison's spectral_gbr on the hard pull (``trials`` trials, seed 0), with
+    or without the ``f_d`` feature."""
     from slipkit.train.commands import train_main
 
     train_main(
@@ -76,6 +79,7 @@ def train(run_dir: Path, trials: int) -> Path:
                 "model=sliptack_spectral_gbr",
                 "scene=sliptack_pull_hard",
                 f"dataset.n_trials={trials}",
+                f"model.f_d_feature={str(f_d).lower()}",
                 f"run_dir={run_dir}",
             ],
         )
@@ -140,9 +144,15 @@ def main() -> None:
     ap.add_argument("--no-fd-run", type=Path, default=None)
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        run_dir = args.run or train(Path(tmp) / "run", args.trials)
+        run_dir = args.run or train(Path(tmp) / "run", args.trials, True)
+        no_fd = args.no_fd_run or train(Path(tmp) / "no_fd", args.trials, False)
         est, trials = held_out(run_dir)
-        validation = {"with f_d": _validation(run_dir)}
+        est2, trials2 = held_out(no_fd)
+        validation = {"with f_d": _validation(run_dir), "no f_d": _validation(no_fd)}
+    if not getattr(est, "f_d_feature", True):
+        raise SystemExit(f"{run_dir}: its model has no f_d feature (--run)")
+    if getattr(est2, "f_d_feature", True):
+        raise SystemExit(f"{no_fd}: its model has the f_d feature (--no-fd-run)")
     graphs = {
         "before (two DFTs)": export_spectral_speed(est, shared_dft=False),
         "after (one shared DFT)": export_spectral_speed(est, shared_dft=True),
@@ -156,17 +166,13 @@ def main() -> None:
     windows, ref = np.concatenate(wins), np.concatenate(expected)
     inputs = dict.fromkeys(graphs, windows)
     refs = dict.fromkeys(graphs, ref)
-    if args.no_fd_run is not None:
-        est2, trials2 = held_out(args.no_fd_run)
-        if getattr(est2, "f_d_feature", True):
-            raise SystemExit(f"{args.no_fd_run}: its model has the f_d feature")
-        key = "no f_d feature (model)"
-        graphs[key] = export_spectral_speed(est2)
-        w2 = [detector_windows(graphs[key], x) for x in trials2]  # type: ignore[arg-type]
-        inputs[key] = np.concatenate([w for w, _ in w2])
-        refs[key] = np.concatenate(
-            [est2.predict(x)[i] for x, (_, i) in zip(trials2, w2, strict=True)]
-        )
+    key = "no f_d feature (model)"
+    graphs[key] = export_spectral_speed(est2)
+    w2 = [detector_windows(graphs[key], x) for x in trials2]  # type: ignore[arg-type]
+    inputs[key] = np.concatenate([w for w, _ in w2])
+    refs[key] = np.concatenate(
+        [est2.predict(x)[i] for x, (_, i) in zip(trials2, w2, strict=True)]
+    )
     sessions = {k: onnx_session(g) for k, g in graphs.items()}
     speeds = {
         k: graph_speeds(s.run(["score"], {"window": inputs[k]})[0])
@@ -215,15 +221,13 @@ def main() -> None:
         )
     after = speeds["after (one shared DFT)"]
     print(f"max |after - before| speed: {np.abs(after - before).max():.2e} mm/s")
-    if args.no_fd_run is not None:
-        print("validation (group CV by trial, training half), overall:")
-        validation["no f_d"] = _validation(args.no_fd_run)
-        for name, v in validation.items():
-            o = v["overall"]
-            print(
-                f"  {name:9s} MAE {o['mae_mm_s']:.2f} mm/s, RMSE {o['rmse_mm_s']:.2f} "
-                f"mm/s over {o['n_trials']:.0f} trials ({v['cv']}, k = {v['k']})"
-            )
+    print("validation (group CV by trial, training half), overall:")
+    for name, v in validation.items():
+        o = v["overall"]
+        print(
+            f"  {name:9s} MAE {o['mae_mm_s']:.2f} mm/s, RMSE {o['rmse_mm_s']:.2f} "
+            f"mm/s over {o['n_trials']:.0f} trials ({v['cv']}, k = {v['k']})"
+        )
 
 
 if __name__ == "__main__":
