@@ -32,8 +32,9 @@ Arr = np.ndarray
 
 
 def _recordings(levels: tuple[float, ...], seed: int = 0) -> tuple[Arr, Arr, Arr]:
-    """One 2000-sample recording per noise level (counts): noise, then a 40 Hz-free
-    vibration burst from sample 1200 at 6x the level; slip labels and segments."""
+    """One 2000-sample recording per noise level (counts): noise, then a 300 Hz
+    vibration burst (in the 60-700 Hz band) from sample 1200 at 6x the level; slip
+    labels and segments."""
     rng = np.random.default_rng(seed)
     xs, ys, segs = [], [], []
     t = np.arange(2000) / 2200.0
