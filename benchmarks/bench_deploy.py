@@ -20,6 +20,12 @@ percentile) with the ratios, the paper's figures (TacTip SVM 3 ms per frame, Jam
 et al. 2018; FSR 4.9 ms only when an FSR bundle exists) and the sensor budget.
 
     .venv/bin/python benchmarks/bench_deploy.py [--rounds 5] [--frames 2000] [--keep DIR]
+        [--only NAME ...] [--before DIR]
+
+``--before DIR`` (a folder of ``<family>/model.onnx``, e.g. an earlier run's ``--keep``
+folder's ``exports``) adds a row per family with that earlier graph's bare call,
+timed in the same rounds on the same inputs: a graph change before and after, side by
+side in one run. The floor of a "before" row is the current graph's.
 """
 
 from __future__ import annotations
@@ -62,6 +68,11 @@ RUNS: dict[str, tuple[list[str], float | None, str]] = {
         ["experiment=fsr_roc"],
         4900.0,
         "FSR touch-and-slip, 4.9 ms per decision (Gentile et al. 2020)",
+    ),
+    "sliptack": (
+        ["experiment=sliptack_speed", "dataset.n_trials=6"],
+        None,
+        "SlipTack speed (analytic: DFT and peak search as a graph)",
     ),
     "force_mlp3": (
         [
@@ -259,6 +270,14 @@ def main() -> None:
         "--keep", type=Path, default=None, help="keep runs and bundles here"
     )
     ap.add_argument("--only", nargs="*", default=None, help="families to run")
+    ap.add_argument(
+        "--before",
+        type=Path,
+        default=None,
+        help="a folder of <family>/model.onnx (an earlier run's --keep DIR/exports): "
+        "each family's earlier graph is timed too (bare call, same inputs and session "
+        "options, in the same rounds) and printed as a 'before' row",
+    )
     args = ap.parse_args()
 
     import onnxruntime as ort
@@ -298,6 +317,10 @@ def main() -> None:
         bundle = load_bundle(bundle_dir)
         m = bundle.manifest
         model = read_run(run_dir).model
+        if isinstance(model, dict):  # SlipTack: per-material speed estimators
+            from slipkit.export.sliptack import SpeedSlipDetector
+
+            model = SpeedSlipDetector(speed=model["*"], threshold=0.0).fit()
         svm = name.startswith("tactip_svm")
         graph = export(model, **({"with_features": True} if svm else {}))
         replay = np.load(bundle_dir / "replay.npz")
@@ -345,6 +368,16 @@ def main() -> None:
         part: dict[str, list[tuple[float, float]]] = {
             k: [] for k in ("bare", "native", "identity")
         }
+        old_path = None if args.before is None else args.before / name / "model.onnx"
+        old_bare = None
+        if old_path is not None and old_path.is_file():
+            old_sess = ort.InferenceSession(
+                str(old_path),
+                bundle.session_spec.options(),
+                providers=["CPUExecutionProvider"],
+            )
+            old_bare = _bound(old_sess, inp.name, m.decision.output, [1, *in_shape])
+            part["before"] = []
         if svm:
             # The SVM part alone (features in), as the issue's reference figures.
             svm_graph = export(model)
@@ -365,6 +398,8 @@ def main() -> None:
                 loop.step(values, ts)
             stats["loop"].append(_pct(loop.result().latency_ns))
             stats["bare"].append(_pct(_time_calls(bare, x32)))
+            if old_bare is not None:
+                part["before"].append(_pct(_time_calls(old_bare, x32)))
             stats["native"].append(_pct(_time_calls(native, inputs[:300])))
             if module is not None:
                 stats["torch"].append(_pct(_time_calls(eager, x32[:1000])))
@@ -404,6 +439,29 @@ def main() -> None:
                 "budget": m.budget.p99_ms * 1e3,
             }
         )
+        n_nodes = len(graph.model.graph.node)
+        if old_bare is not None:
+            import onnx
+
+            old_nodes = len(onnx.load(str(old_path)).graph.node)
+            notes.append(f"{name}: {n_nodes} graph nodes (before: {old_nodes})")
+            rows.append(
+                {
+                    "model": f"{name}: before ({old_nodes}-node graph of --before)",
+                    "loop": None,
+                    "bare": _median(part)["before"],
+                    "native": med["native"],
+                    "torch": None,
+                    "identity": med["identity"][0],
+                    "flops": graph_flops(old_path.read_bytes(), None),
+                    "numpy": None,
+                    "floor": floor,
+                    "paper": None,
+                    "budget": None,
+                }
+            )
+        else:
+            notes.append(f"{name}: {n_nodes} graph nodes")
         if svm:
             n_sv = int(model.svc_.support_vectors_.shape[0])
             notes.append(f"{name}: {n_sv} support vectors on {feats.shape[1]} features")

@@ -401,30 +401,35 @@ def export_fsr_touch_slip(
         return _fsr_graph_out(
             g, inp, score64, detector, w, v_rest, rest_sig, delta, gate, polarity, sign
         )
-    blocks = g.op("Reshape", v, g.const([-1, 2, b], np.int64), stem="blocks")
-    means = g.op(
-        "Div",
-        g.op("ReduceSum", blocks, _axes(g, 2), keepdims=0),
-        g.const(float(b), np.float64),
-        stem="means",
-    )
-    zero, one = g.const(0, np.int64), g.const(1, np.int64)
-    prev = g.op("Gather", means, zero, axis=1, stem="prev_mean")
-    last = g.op("Gather", means, one, axis=1, stem="mean")
-    deriv = g.op(
-        "Mul", g.op("Sub", last, prev), g.const(sign * per_s, np.float64), stem="deriv"
-    )
-    ok = g.op("Not", _not_finite(g, deriv), stem="finite")
+    # One MatMul gives both block statistics (few nodes: node dispatch, not arithmetic,
+    # dominates a batch-1 call): column 0 the signed derivative of the two block means,
+    # column 1 ``-sign * mean(last block)``, whose zero weights on the previous block
+    # still turn a NaN / inf anywhere in the window into NaN (0 * NaN = 0 * inf = NaN),
+    # so the gate ``press > delta`` (``sign (rest - last) > delta``) is also the
+    # finiteness test.
+    cols = np.zeros((w, 2))
+    cols[:b, 0] = -sign * per_s / b
+    cols[b:, 0] = sign * per_s / b
+    cols[b:, 1] = -sign / b
+    stats = g.op("MatMul", v, g.const(cols, np.float64), stem="block_stats")
+    deriv, press = g._fresh("deriv"), g._fresh("press")
+    split = {"num_outputs": 2} if g.opset >= 18 else {}
+    g.nodes.append(helper.make_node("Split", [stats], [deriv, press], axis=1, **split))
     if gate:
-        press = g.op(
-            "Mul",
-            g.op("Sub", g.const(rest_sig, np.float64), last),
-            g.const(sign, np.float64),
-            stem="press",
+        ok = g.op(
+            "Greater",
+            press,
+            g.const(delta - sign * rest_sig, np.float64),
+            stem="touched",
         )
-        touched = g.op("Greater", press, g.const(delta, np.float64), stem="touched")
-        ok = g.op("And", ok, touched)
-    score64 = g.op("Where", ok, deriv, g.const(NO_SCORE, np.float64), stem="score64")
+    else:
+        ok = g.op("Not", _not_finite(g, deriv), stem="finite")
+    score64 = g.op(
+        "Reshape",
+        g.op("Where", ok, deriv, g.const(NO_SCORE, np.float64)),
+        g.const([-1], np.int64),
+        stem="score64",
+    )
     return _fsr_graph_out(
         g, inp, score64, detector, w, v_rest, rest_sig, delta, gate, polarity, sign
     )

@@ -1,21 +1,25 @@
-"""Exporters of the analytic BioTac force models: hand-built graphs, evaluated in float64.
+"""Exporters of the analytic BioTac force models: hand-built graphs of few nodes.
 
 * :class:`~slipkit.models.force.WeightedNormalsRegressor` -- ``F_k = S_k sum_i E_i
-  N_k,i + o_k`` is one matrix product: ``Gemm(x, W, o)`` with ``W[i, k] = N_k,i S_k``
-  for the electrode columns and zero rows for any extra input column (the model reads
-  only its electrodes).
+  N_k,i + o_k`` is one matrix product: ``Gemm(x, W, o)`` in float32 with ``W[i, k] =
+  N_k,i S_k`` for the electrode columns and zero rows for any extra input column (the
+  model reads only its electrodes); the graph is that one node.
 * :class:`~slipkit.models.force.LocalLinearRegressor` -- with ``z = (x - mean) /
-  scale``, the receptive-field activations are ``softmax(-||z - c_k||^2 / 2 h^2)``
-  (``||z||^2 - 2 z C^T + ||C||^2`` by one ``Gemm``), every local ridge model ``W_k (z
-  - c_k) + b_k`` is one column block of ``z @ [W_1^T .. W_K^T] + [b_k - W_k c_k]``,
-  and the prediction is the activation-weighted sum over fields (``Mul`` +
-  ``ReduceSum``).
+  scale``, the receptive-field activations are ``softmax(-||z - c_k||^2 / 2 h^2)`` =
+  ``softmax((2 z C^T - ||C||^2) / 2 h^2)`` (``||z||^2`` is the same for every field of
+  a row, and softmax ignores a per-row constant): one ``Gemm``; every local ridge
+  model ``W_k (z - c_k) + b_k`` is one column block of ``z @ [W_1^T .. W_K^T] + [b_k -
+  W_k c_k]``: a second ``Gemm``. The scaler is folded into both Gemms' weights and
+  biases, and the activation-weighted sum over fields is ``(act @ R) * local @ S``
+  with constant 0/1 matrices ``R`` (repeat each activation per output) and ``S`` (sum
+  over fields): eight nodes where the step-by-step form had seventeen (node dispatch,
+  ~0.3 us each, not arithmetic, dominates a batch-1 call).
 
-Both graphs cast their float32 input to float64 first and their output back to
-float32 at the end: the electrode inputs are counts of order 10^2-10^3 and the
-LWR distances cancel, so float32 arithmetic inside would cost more than the input
-cast does. The output is ``predict`` (N), shape ``(batch, n_outputs)`` (``(batch,)``
-for a model fitted on a 1-D target).
+The LWR graph casts its float32 input to float64 first and its output back to float32
+at the end: the electrode inputs are counts of order 10^2-10^3, and with the scaler
+folded in the Gemms cancel what the scaler's subtraction did, so float32 arithmetic
+inside would lose digits. The output is ``predict`` (N), shape ``(batch, n_outputs)``
+(``(batch,)`` for a model fitted on a 1-D target).
 """
 
 from __future__ import annotations
@@ -41,23 +45,31 @@ SCORE = "score"
 
 def _finish(
     g: GraphBuilder,
-    out64: str,
+    out: str,
     *,
     n_features: int,
     n_outputs: int,
     one_d: bool,
     name: str,
     doc: str,
+    cast: bool = True,
 ) -> ExportedGraph:
-    """Cast to float32, flatten a 1-D model's output, build, wrap as an ExportedGraph."""
-    out = g.op("Cast", out64, to=FLOAT)
+    """Cast to float32 (``cast``: ``out`` is float64), flatten a 1-D model's output,
+    build, wrap as an ExportedGraph. The last node writes ``score`` itself (no
+    Identity)."""
+    if cast:
+        out = g.op("Cast", out, to=FLOAT)
     if one_d:
         g.nodes.append(
             helper.make_node("Reshape", [out, g.const([-1], np.int64)], [SCORE])
         )
         out_shape: list[str | int] = ["batch"]
     else:
-        g.rename(out, SCORE)
+        last = g.nodes[-1]
+        if list(last.output) == [out]:
+            last.output[0] = SCORE
+        else:
+            g.rename(out, SCORE)
         out_shape = ["batch", n_outputs]
     model = g.build(
         [helper.make_tensor_value_info(INPUT, FLOAT, ["batch", n_features])],
@@ -83,7 +95,7 @@ def _finish(
 def export_weighted_normals(
     estimator: WeightedNormalsRegressor, *, opset: int = DEFAULT_OPSET
 ) -> ExportedGraph:
-    """Export a fitted :class:`WeightedNormalsRegressor` as one float64 ``Gemm``.
+    """Export a fitted :class:`WeightedNormalsRegressor` as one float32 ``Gemm``.
 
     Parameters
     ----------
@@ -104,13 +116,15 @@ def export_weighted_normals(
     n_el, n_out = normals.shape
     weights = np.zeros((n_features, n_out))
     weights[:n_el] = normals * np.asarray(estimator.scales_, dtype=np.float64)
+    # one float32 Gemm, the graph's only node: the float64 casts around it cost more
+    # than they buy (float32 rounding of a dozen count x weight products, ~1e-6 N for
+    # forces of a few N, far inside the parity tolerance)
     g = GraphBuilder("weighted_normals", opset)
-    x = g.op("Cast", INPUT, to=DOUBLE)
     out = g.op(
         "Gemm",
-        x,
-        g.const(weights, np.float64),
-        g.const(np.asarray(estimator.offsets_, dtype=np.float64), np.float64),
+        INPUT,
+        g.const(weights, np.float32),
+        g.const(np.asarray(estimator.offsets_, dtype=np.float64), np.float32),
         stem="force",
     )
     return _finish(
@@ -120,6 +134,7 @@ def export_weighted_normals(
         n_outputs=n_out,
         one_d=bool(getattr(estimator, "_y_1d", False)),
         name="WeightedNormalsRegressor",
+        cast=False,
         doc="WeightedNormalsRegressor: force = x[:, :n_el] @ (normals * scales) + offsets",
     )
 
@@ -141,7 +156,7 @@ def _ridge_blocks(
 def export_local_linear(
     estimator: LocalLinearRegressor, *, opset: int = DEFAULT_OPSET
 ) -> ExportedGraph:
-    """Export a fitted :class:`LocalLinearRegressor` (Gemm, Softmax, Mul, ReduceSum in float64).
+    """Export a fitted :class:`LocalLinearRegressor` (two Gemms, Softmax, MatMul, Mul in float64).
 
     Parameters
     ----------
@@ -166,36 +181,38 @@ def export_local_linear(
     k = len(centres)
     h2 = 2.0 * float(estimator.width_) ** 2
     weights, biases = _ridge_blocks(estimator)
+    # Fewer nodes (node dispatch, not arithmetic, dominates a batch-1 call): the
+    # scaler folds into both Gemms (z = (x - m) / s, so z A + a = x (A / s) + (a - (m /
+    # s) A)), and the softmax drops ||z||^2 / 2h^2, the same for every field of a row
+    # (softmax is invariant to a per-row constant; it subtracts the row maximum itself).
+    # Both Gemms read the float64 counts: folded, they hold the cancellation the
+    # scaler's Sub did, so float32 would lose digits here.
+    mean = np.asarray(scaler.mean_, dtype=np.float64)
+    inv = 1.0 / np.asarray(scaler.scale_, dtype=np.float64)
+
+    def folded(a: NDArray[np.float64], bias: NDArray[np.float64]) -> tuple[str, str]:
+        a_x = a * inv[:, None]
+        return g.const(a_x, np.float64), g.const(bias - mean @ a_x, np.float64)
+
     g = GraphBuilder("local_linear", opset)
     x = g.op("Cast", INPUT, to=DOUBLE)
-    z = g.op(
-        "Mul",
-        g.op("Sub", x, g.const(scaler.mean_, np.float64)),
-        g.const(1.0 / np.asarray(scaler.scale_, dtype=np.float64), np.float64),
-        stem="z",
-    )
-    axis1 = g.const([1], np.int64)
-    zz = g.op("ReduceSum", g.op("Mul", z, z), axis1, keepdims=1, stem="zz")
-    # -d^2 / 2h^2 = (2 z C^T - ||C||^2 - ||z||^2) / 2h^2
-    cross = g.op(
+    # logits = -d^2 / 2h^2 + ||z||^2 / 2h^2 = (2 z C^T - ||C||^2) / 2h^2
+    logits = g.op(
         "Gemm",
-        z,
-        g.const(2.0 * centres.T / h2, np.float64),
-        g.const(-np.sum(centres * centres, axis=1) / h2, np.float64),
-        stem="cross",
+        x,
+        *folded(2.0 * centres.T / h2, -np.sum(centres * centres, axis=1) / h2),
+        stem="logits",
     )
-    logits = g.op("Sub", cross, g.op("Div", zz, g.const(h2, np.float64)))
     act = g.op("Softmax", logits, axis=1, stem="activation")  # (batch, K)
-    local = g.op(
-        "Gemm",
-        z,
-        g.const(weights, np.float64),
-        g.const(biases, np.float64),
-        stem="local",
-    )  # (batch, K * O)
-    local3 = g.op("Reshape", local, g.const([0, k, n_out], np.int64))
-    act3 = g.op("Unsqueeze", act, g.const([2], np.int64))
-    out = g.op("ReduceSum", g.op("Mul", local3, act3), axis1, keepdims=0, stem="force")
+    local = g.op("Gemm", x, *folded(weights, biases), stem="local")  # (batch, K * O)
+    # sum_k act_k local_k,o as two constant MatMuls: act repeated O times per field
+    # (K, K * O), and the sum over fields of the product (K * O, O)
+    repeat = np.kron(np.eye(k), np.ones((1, n_out)))
+    fields = np.tile(np.eye(n_out), (k, 1))
+    weighted = g.op(
+        "Mul", g.op("MatMul", act, g.const(repeat, np.float64)), local, stem="weighted"
+    )
+    out = g.op("MatMul", weighted, g.const(fields, np.float64), stem="force")
     return _finish(
         g,
         out,

@@ -12,7 +12,11 @@ oldest first, and returns ``score`` ``(batch,)`` float32:
 2. **spectrum**: Hamming window, zero padding to ``nfft = W pad_factor``, and the real
    DFT as a two-stage Cooley-Tukey factorisation ``nfft = N1 N2`` (:func:`dft_matrices`:
    two ``MatMul`` ops with constant cosine / sine matrices, the twiddles folded into the
-   second; 1000 = 25 x 40): 0.13 M multiply-adds instead of the 1 M of one DFT matrix.
+   second, whose ``N1`` products each take one ``[A_re, A_im]`` row; 1000 = 25 x 40):
+   0.13 M multiply-adds instead of the 1 M of one DFT matrix. (The two-GEMM twiddle form
+   of :mod:`slipkit.export.spectral` is ~3 us faster here but rounds the twiddled
+   values to float32 once more: speeds then differ from the batch by up to 1.5e-6
+   relative, over the tests' 1e-6.)
    ONNX's ``DFT`` op is not used (onnxruntime 1.31 runs lengths that are not powers of
    two as an ``O(n^2)`` loop). The two products run in ``dft_dtype`` (float32 by
    default: MLAS's float32 kernels, ~14 us per call less than float64 in
@@ -22,7 +26,14 @@ oldest first, and returns ``score`` ``(batch,)`` float32:
    ``f_max``, the ``min_peak_ratio`` rule (squared, on power) against the largest bin of
    the whole spectrum (DC excluded), then per ``f_max`` a ``TopK`` of the peaks at or
    below it (ties: the lower bin, as the batch sort) and the mean over ``j = 1..n_peaks``
-   of the top-``j`` means; ``f_d`` is their mean over the ``f_max`` values with a peak;
+   of the top-``j`` means; ``f_d`` is their mean over the ``f_max`` values with a peak.
+   Constants are folded where the float result is the same or within rounding (the
+   ratio into the mask of the largest bin, ``1 / n_peaks`` into the frequencies, the
+   gate's mean into one ``MatMul``), the harmonic relation runs in float32 (exact
+   counts), and the interpolation is one ``Gather`` of the bin triples and one ``(2,
+   3)`` ``MatMul`` for the vertex offset's numerator and denominator (96 -> 84 nodes for
+   the shipped detector config, with the DFT's; a zero-power neighbour of a peak, never seen in noisy
+   data, gets a clipped offset where the batch form's is 0);
 4. **speed** (eq. 3 inverted): ``form="paper"`` in closed form; ``form="exact"`` by
    linear interpolation in a table of the batch bisection over the frequencies ``f_d``
    can take (:func:`speed_table`: from the DFT resolution to the largest ``f_max``,
@@ -191,14 +202,15 @@ def _frequency(g: GraphBuilder, x: str, est: StickSlipSpeed, dft_dtype: str) -> 
     if dt is np.float32:
         xw = g.op("Cast", xw, to=FLOAT)
     grid = g.op("Reshape", xw, g.const([-1, n1, n2], np.int64), stem="grid")
-    a = g.op(
-        "MatMul", g.const(f1, dt), grid, stem="stage1"
-    )  # (b, 2 N1, N2): re, im rows
-    a = g.op("Reshape", a, g.const([-1, 2, n1, 1, n2], np.int64))
-    # (b, 2, N1, 1, N2) @ (2, N1, N2, 2 K2): the A_re and A_im halves of G, summed
-    g2 = np.stack([gm[:, :n2, :], gm[:, n2:, :]])
-    y = g.op("MatMul", a, g.const(g2, dt), stem="stage2")
-    y = g.op("ReduceSum", y, _axes(g, 1), keepdims=0)
+    # F1's rows interleaved per k1 (cos row, then -sin row), so that A reshapes to
+    # (b, N1, 1, 2 N2): [A_re, A_im] of each k1 as one row, and stage 2 is N1 products
+    # of one 2 N2 row by G[k1] (no sum of separate re / im halves: one node and half
+    # the batched products fewer than the split form, the same constants and float
+    # roundings as before, so the same spectrum)
+    f1i = f1.reshape(2, n1, n1).transpose(1, 0, 2).reshape(2 * n1, n1)
+    a = g.op("MatMul", g.const(f1i, dt), grid, stem="stage1")  # (b, 2 N1, N2)
+    a = g.op("Reshape", a, g.const([-1, n1, 1, 2 * n2], np.int64))
+    y = g.op("MatMul", a, g.const(gm, dt), stem="stage2")  # (b, N1, 1, 2 K2)
     y = g.op("Reshape", y, g.const([-1, n1, 2, k2n], np.int64))
     power = _reduce(g, "ReduceSumSquare", y, (2,), 0)  # (b, N1, K2), bin k1 + N1 k2
     power = g.op("Reshape", power, g.const([-1, n1 * k2n], np.int64), stem="power")
@@ -240,15 +252,17 @@ def _peak_frequency(
 
     mid = bins(1)
     # the largest magnitude of the spectrum, DC excluded (bins beyond nfft / 2 masked)
-    spectrum = np.isin(np.arange(n_power), pos[1:])
-    masked = g.op("Mul", power, g.const(spectrum, dt))
-    gmax = _reduce(g, "ReduceMax", masked, (1,), 1)
+    # (min_peak_ratio squared, on power, folded into the mask: the largest of
+    # ratio2 x power is ratio2 x the largest, the same float product)
     ratio2 = float(est.min_peak_ratio) ** 2  # on power
+    spectrum = np.isin(np.arange(n_power), pos[1:]) * ratio2
+    masked = g.op("Mul", power, g.const(spectrum, dt))
+    gmax_r = _reduce(g, "ReduceMax", masked, (1,), 1)
     lower, upper = bins(0), bins(2)
     peak = g.op(
         "And",
         g.op("And", g.op("Greater", mid, lower), g.op("Greater", mid, upper)),
-        g.op("GreaterOrEqual", mid, g.op("Mul", gmax, g.const(ratio2, dt))),
+        g.op("GreaterOrEqual", mid, gmax_r),
         stem="peak",
     )  # (b, c)
     gate = float(getattr(est, "min_peak_to_mean", 0.0) or 0.0)
@@ -256,25 +270,29 @@ def _peak_frequency(
         # no stick-slip oscillation: the largest bin of the gate band is not gate x
         # the band's mean power (gate_first_bin); then no peak counts, f_d is NaN
         k0 = gate_first_bin(nfft, min(int(est.detrend_frames), int(est.window)))
-        band = g.op("Mul", power, g.const(np.isin(np.arange(n_power), pos[k0:]), dt))
+        in_band = np.isin(np.arange(n_power), pos[k0:])
+        band = g.op("Mul", power, g.const(in_band, dt))
+        # gate x the band's mean power: one MatMul with the weights gate / n_band
         mean = g.op(
-            "Mul",
-            g.op("ReduceSum", band, _axes(g, 1), keepdims=1),
-            g.const(gate / (last + 1 - k0), dt),
+            "MatMul", power, g.const((in_band * (gate / (last + 1 - k0)))[:, None], dt)
         )
         bmax = _reduce(g, "ReduceMax", band, (1,), 1)
         peak = g.op("And", peak, g.op("GreaterOrEqual", bmax, mean), stem="gated")
     if est.harmonics == "fundamental":
         # a counted peak at ~m x a lower counted peak is a harmonic: one MatMul with a
         # constant (c, c) relation of the bins (harmonic_mask's rule on bin numbers)
+        # (in float32: counts of a few 0/1 products are exact, and MLAS's float32
+        # kernel is the fast one)
         rel = harmonic_relation(np.arange(1, c + 1), float(est.harmonic_tol))
         hits = g.op(
-            "MatMul", g.op("Cast", peak, to=DOUBLE), _d(g, rel.astype(np.float64))
+            "MatMul",
+            g.op("Cast", peak, to=FLOAT),
+            g.const(rel.astype(np.float32), np.float32),
         )
         peak = g.op(
             "And",
             peak,
-            g.op("Less", hits, _d(g, 0.5)),
+            g.op("Less", hits, g.const(0.5, np.float32)),
             stem="fundamental",
         )
     # a peak's power, -1 for other bins; per f_max, -inf above it (one broadcast Add:
@@ -289,44 +307,52 @@ def _peak_frequency(
     )
     k = min(int(est.n_peaks), c)
     top, idx = _topk(g, ranked, k)  # (b, n_fmax, k), largest first, ties: lower bin
-    valid = g.op(
-        "Cast", g.op("GreaterOrEqual", top, g.const(0.0, dt)), to=DOUBLE, stem="valid"
-    )
+    is_valid = g.op("GreaterOrEqual", top, g.const(0.0, dt))
+    valid = g.op("Cast", is_valid, to=DOUBLE, stem="valid")
+    # every frequency is divided by n_peaks here (folded into constants), so that
+    # eq. 6-7's mean below is one Div
+    n_peaks = int(est.n_peaks)
+    bin_hz = float(freqs[1] - freqs[0])
     if est.interpolate:
         # the parabola through the log powers (= 2 log magnitudes: the vertex offset is
-        # the same) of each bin and its neighbours, as parabolic_offset. Few nodes: the
-        # log of the whole spectrum once; twice the offset, (a - c) / (a - 2 b + c),
-        # clipped to +-1 and the half folded into the bin width; no den < 0 test (a
-        # strict maximum has one; other bins only need a finite value, as they are
-        # masked by ``valid`` below).
-        logp = g.op("Log", power)
+        # the same) of each bin and its neighbours, as parabolic_offset, in few nodes:
+        # one Gather of the (bin - 1, bin, bin + 1) powers (b, 3, c), their log (powers
+        # clamped to the smallest normal float32: a zero bin has a finite log), then
+        # one constant MatMul (2, 3) for the offset's numerator ``h (a - c)`` and its
+        # denominator ``a - 2 b + c`` (h = half a bin / n_peaks, so the offset comes out
+        # in Hz / n_peaks), Clip to +-h. No den < 0 test: a strict maximum has one, and
+        # other bins (possibly 0 / 0) are dropped by the ``Where`` on ``valid`` below.
+        trip = g.op(
+            "Gather",
+            power,
+            g.const(np.stack([pos[d : d + c] for d in (0, 1, 2)]), np.int64),
+            axis=1,
+        )  # (b, 3, c)
+        logp = g.op("Log", g.op("Max", trip, g.const(np.finfo(np.float32).tiny, dt)))
         if dt is np.float32:
             logp = g.op("Cast", logp, to=DOUBLE)
-        la, lb, lc = (
-            g.op("Gather", logp, g.const(pos[lo : lo + c], np.int64), axis=1)
-            for lo in (0, 1, 2)
-        )
-        den = g.op("Sub", g.op("Add", la, lc), g.op("Add", lb, lb))
-        off2 = g.op("Div", g.op("Sub", la, lc), den)
-        finite = g.op("Equal", g.op("Sub", off2, off2), _d(g, 0.0))  # NaN, inf: False
-        off2 = g.op(
-            "Where", finite, g.op("Clip", off2, _d(g, -1.0), _d(g, 1.0)), _d(g, 0.0)
-        )
-        bin_hz = float(freqs[1] - freqs[0])
+        half = 0.5 * bin_hz / n_peaks
+        nd = g.op("MatMul", _d(g, [[half, 0.0, -half], [1.0, -2.0, 1.0]]), logp)
+        num, den = g._fresh("num"), g._fresh("den")
+        split = {"num_outputs": 2} if g.opset >= 18 else {}
+        g.nodes.append(helper.make_node("Split", [nd], [num, den], axis=1, **split))
+        off = g.op("Clip", g.op("Div", num, den), _d(g, -half), _d(g, half))
         fb = g.op(
-            "Mul",
-            g.op("Add", off2, _d(g, 2.0 * np.arange(1, c + 1, dtype=np.float64))),
-            _d(g, 0.5 * bin_hz),
+            "Add",
+            off,
+            _d(g, np.arange(1, c + 1, dtype=np.float64) * bin_hz / n_peaks),
             stem="peak_hz",
-        )  # (b, c)
-        fb = g.op(
-            "Expand",
-            g.op("Unsqueeze", fb, _axes(g, 1)),
-            g.const([1, len(fmax), c], np.int64),
+        )  # (b, 1, c), Hz / n_peaks
+        fb = g.op("Expand", fb, g.const([1, len(fmax), c], np.int64))
+        ftop = g.op(
+            "Where", is_valid, g.op("GatherElements", fb, idx, axis=2), _d(g, 0.0)
         )
-        ftop = g.op("Mul", g.op("GatherElements", fb, idx, axis=2), valid)
     else:
-        ftop = g.op("Mul", g.op("Gather", _d(g, freqs[1 : c + 1]), idx, axis=0), valid)
+        ftop = g.op(
+            "Mul",
+            g.op("Gather", _d(g, freqs[1 : c + 1] / n_peaks), idx, axis=0),
+            valid,
+        )
     n_valid = g.op("ReduceSum", valid, _axes(g, 2), keepdims=1, stem="n_valid")  # L
     n_div = g.op("Max", n_valid, _d(g, 1.0))
     csf = g.op("CumSum", ftop, g.const(2, np.int64), stem="csf")
@@ -334,7 +360,6 @@ def _peak_frequency(
     # an f_max without a peak adds 0 to the sum and 0 to the count (eq. 7's nanmean)
     denom = g.op("Min", _d(g, np.arange(1, k + 1, dtype=np.float64)), n_div)
     quot = g.op("Div", csf, denom)
-    n_peaks = int(est.n_peaks)
     if n_peaks > k:  # more ranks than candidate bins: the rest are the mean of all
         total = _slice(g, csf, k - 1, k, 2)
         rest = g.op("Mul", g.op("Div", total, n_div), _d(g, float(n_peaks - k)))
@@ -343,7 +368,7 @@ def _peak_frequency(
     den = g.op(
         "ReduceSum", g.op("Min", n_valid, _d(g, 1.0)), _axes(g, 1, 2), keepdims=0
     )
-    return g.op("Div", num, g.op("Mul", den, _d(g, float(n_peaks))), stem="f_d")
+    return g.op("Div", num, den, stem="f_d")
 
 
 def _topk(g: GraphBuilder, values: str, k: int) -> tuple[str, str]:

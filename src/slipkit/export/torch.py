@@ -18,17 +18,20 @@ A skorch-based estimator is taken apart by duck typing (:func:`find_torch_parts`
   softmax / sigmoid to the module's logits; skorch's own
   ``_get_predict_nonlinearity``).
 
-These become constant ops around the module in the graph, so the graph's score
-is what the estimator returns: ``predict_proba`` for classifiers, ``predict``
+These become constant ops around the module in the graph, or, next to a
+``Sequential``'s first / last ``Linear``, are folded into that layer's weights and
+bias (:func:`fold_standardisation`: fewer nodes), so the graph's score is what the
+estimator returns: ``predict_proba`` for classifiers, ``predict``
 for regressors.
 """
 
 from __future__ import annotations
 
+import copy
 import io
 import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -196,6 +199,71 @@ def find_torch_parts(estimator: Any) -> TorchParts:
     )
 
 
+def fold_standardisation(parts: TorchParts) -> TorchParts:
+    """The same computation with the scalers folded into a Sequential's end Linear layers.
+
+    ``(x - m) / s`` before a first ``nn.Linear`` ``(W, b)`` is the layer ``(W / s, b -
+    (W / s) m)``, and ``y s_y + m_y`` after a last one (no predict non-linearity) is
+    ``(s_y W, s_y b + m_y)``: the graph then has no Sub / Mul / Add around the Gemms
+    (each ~0.3 us of node dispatch at batch 1, where the whole 3x10 force MLP is a
+    few us). Folded in float64, stored in float32 on a copy of the module; other
+    modules, or a Sequential not starting (ending) with a Linear, keep the scaler ops.
+
+    Parameters
+    ----------
+    parts : TorchParts
+        From :func:`find_torch_parts`; not modified.
+
+    Returns
+    -------
+    TorchParts
+        ``parts`` itself when nothing folds, else a copy with a new module and the
+        folded scalers set to None.
+    """
+    module = parts.module
+    if not isinstance(module, nn.Sequential) or len(module) == 0:
+        return parts
+    first, last = module[0], module[len(module) - 1]
+    fold_in = (
+        isinstance(first, nn.Linear)
+        and first.bias is not None
+        and parts.x_mean is not None
+        and parts.x_scale is not None
+    )
+    fold_out = (
+        isinstance(last, nn.Linear)
+        and last.bias is not None
+        and parts.nonlinearity is None
+        and parts.y_mean is not None
+        and parts.y_scale is not None
+    )
+    if not (fold_in or fold_out):
+        return parts
+    folded = copy.deepcopy(module)
+    with torch.no_grad():
+        if fold_in:
+            lin = folded[0]
+            w = lin.weight.detach().double().numpy() / np.asarray(parts.x_scale)
+            b = lin.bias.detach().double().numpy() - w @ np.asarray(parts.x_mean)
+            lin.weight.copy_(torch.as_tensor(w, dtype=lin.weight.dtype))
+            lin.bias.copy_(torch.as_tensor(b, dtype=lin.bias.dtype))
+        if fold_out:
+            lin = folded[len(folded) - 1]
+            ys = np.asarray(parts.y_scale, dtype=np.float64)
+            w = lin.weight.detach().double().numpy() * ys[:, None]
+            b = lin.bias.detach().double().numpy() * ys + np.asarray(parts.y_mean)
+            lin.weight.copy_(torch.as_tensor(w, dtype=lin.weight.dtype))
+            lin.bias.copy_(torch.as_tensor(b, dtype=lin.bias.dtype))
+    return replace(
+        parts,
+        module=folded,
+        x_mean=None if fold_in else parts.x_mean,
+        x_scale=None if fold_in else parts.x_scale,
+        y_mean=None if fold_out else parts.y_mean,
+        y_scale=None if fold_out else parts.y_scale,
+    )
+
+
 class _Deployed(nn.Module):
     """module with the standardisations and non-linearity as constant ops around it."""
 
@@ -252,7 +320,9 @@ def export_torch_module(
         or ``(n_steps, n_channels)`` for a GRU.
     parts : TorchParts, optional
         Standardisations and non-linearity to wrap around the module (from
-        :func:`find_torch_parts`); ``parts.module`` must be ``module``.
+        :func:`find_torch_parts`); ``parts.module`` must be ``module``. Scalers
+        next to a Sequential's first / last Linear are folded into its weights
+        (:func:`fold_standardisation`; ``module`` itself is not changed).
     score_method : str
         The method the output reproduces (``"forward"``: the module itself).
     score_meaning : str, optional
@@ -268,9 +338,11 @@ def export_torch_module(
         Input ``"input"`` of shape ``("batch", *input_shape)``, output ``"score"``.
     """
     opset = check_opset(opset)
-    wrapped = _Deployed(parts if parts is not None else TorchParts(module=module))
     was_training = module.training
     module.eval()
+    if parts is not None:
+        parts = fold_standardisation(parts)
+    wrapped = _Deployed(parts if parts is not None else TorchParts(module=module))
     example = torch.zeros((2, *(int(s) for s in input_shape)), dtype=torch.float32)
     buffer = io.BytesIO()
     try:

@@ -322,6 +322,10 @@ class StreamLoop:
         self._finite = np.zeros(m.frame.shape, dtype=bool)
         self._windows = [self._ring[j : j + self._w] for j in range(self._w)]
         self._ops = list(bundle.preprocessing.ops)
+        # A last step that can write into the graph input directly (``into``, e.g.
+        # baseline_first) saves the copy of its output buffer per decision.
+        self._into = getattr(self._ops[-1], "into", None) if self._ops else None
+        self._head_ops = self._ops[:-1] if self._into is not None else self._ops
         (inp,) = m.inputs
         assert inp.dtype is not None
         self._input = np.zeros(inp.static_shape, dtype=np.dtype(inp.dtype))
@@ -460,7 +464,8 @@ class StreamLoop:
             and values.dtype.kind in "fiu"
         ):
             ring[p] = values
-            ring[p + w] = values
+            if w > 1:  # the copy that keeps every window contiguous; none for one frame
+                ring[p + w] = values
             self._check(ring[p], out=self._finite)
             # A bytes search is the cheapest exact any/all on a small bool array.
             if self._bad_byte in self._finite.tobytes():
@@ -491,9 +496,12 @@ class StreamLoop:
             self._run = 0
             return None
         x = self._windows[p]
-        for op in self._ops:
+        for op in self._head_ops:
             x = op(x)
-        self._input_view[...] = x
+        if self._into is None:
+            self._input_view[...] = x
+        else:
+            self._into(x, self._input_view)
         self._check(self._input, out=self._input_finite)
         if self._bad_byte in self._input_finite.tobytes():
             # A finite frame can still overflow float32 after preprocessing (or an

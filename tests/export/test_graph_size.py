@@ -1,0 +1,205 @@
+"""Graph sizes of the small exported models do not grow back, and the smaller graphs
+and the loop's one-frame path give the same numbers (issue 16, docs/deploy.md)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from tests.runtime.helpers import linear_graph, manifest
+
+from slipkit.baselines.fsr import FSRTouchSlip
+from slipkit.baselines.sliptack import StickSlipSpeed
+from slipkit.export import check_parity, export
+from slipkit.export import force as _force  # noqa: F401  (registers the force exporters)
+from slipkit.export.detectors import export_fsr_touch_slip
+from slipkit.export.parity import onnx_session
+from slipkit.export.sliptack import export_stick_slip_speed
+from slipkit.export.torch import find_torch_parts, fold_standardisation
+from slipkit.models.force import (
+    ForceMLP,
+    LocalLinearRegressor,
+    WeightedNormalsRegressor,
+)
+from slipkit.runtime import StreamLoop, load_bundle, write_bundle
+from slipkit.runtime.preprocessing import Pipeline
+
+
+def _ops(graph: Any) -> list[str]:
+    return [n.op_type for n in graph.model.graph.node]
+
+
+def _force_data(n: int = 300, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    X = rng.normal(0.0, 80.0, (n, 19))  # electrode counts after the baseline
+    Y = X[:, :3] * 0.02 + np.tanh(X[:, 3:6] / 100.0) + rng.normal(0, 0.05, (n, 3))
+    return X, Y
+
+
+def test_fsr_graph_is_one_matmul_and_a_gate() -> None:
+    """The two-block FSR graph has 9 nodes (one MatMul for both block statistics)."""
+    det = FSRTouchSlip(threshold=8.0, polarity="falling").fit(
+        np.full((20, 1), 4.5), np.zeros(20, int)
+    )
+    graph = export_fsr_touch_slip(det, rest=4.5)
+    expected = [
+        "Cast",
+        "Reshape",
+        "MatMul",
+        "Split",
+        "Greater",
+        "Where",
+        "Reshape",
+        "Clip",
+        "Cast",
+    ]
+    assert expected == _ops(graph)
+
+
+def test_force_graphs_have_few_nodes_and_reproduce_predict() -> None:
+    """Weighted normals: one Gemm; LWR: 8 nodes; both within 1e-4 N of predict."""
+    X, Y = _force_data()
+    normals = WeightedNormalsRegressor().fit(X[:200], Y[:200])
+    lwr = LocalLinearRegressor(n_fields=7, random_state=0).fit(X[:200], Y[:200])
+    g_n, g_l = export(normals), export(lwr)
+    assert ["Gemm"] == _ops(g_n)
+    expected = ["Cast", "Gemm", "Softmax", "Gemm", "MatMul", "Mul", "MatMul", "Cast"]
+    assert expected == _ops(g_l)
+    for est, graph in ((normals, g_n), (lwr, g_l)):
+        report = check_parity(est, graph, X[200:])
+        assert (True, True) == (report["passed"], report["max_abs_diff"] <= 1e-4)
+
+
+def test_force_mlp_graph_has_the_scalers_folded_and_the_module_unchanged() -> None:
+    """The MLP graph is Gemm/Tanh only, equals predict to 1e-4 N, and the fitted module keeps its weights."""
+    X, Y = _force_data()
+    model = ForceMLP(hidden=(10, 10, 10), max_epochs=3, random_state=0).fit(X, Y)
+    before = [p.detach().clone() for p in model.module_.parameters()]
+    graph = export(model)
+    assert {"Gemm", "Tanh"} == set(_ops(graph))
+    after = list(model.module_.parameters())
+    assert all(bool((a == b).all()) for a, b in zip(before, after, strict=True))
+    report = check_parity(model, graph, X[:100])
+    assert (True, True) == (report["passed"], report["max_abs_diff"] <= 1e-4)
+
+
+def test_fold_standardisation_leaves_a_non_sequential_module_alone() -> None:
+    """A module that is not a Sequential keeps its scaler ops (the parts come back as given)."""
+    import torch
+
+    class Net(torch.nn.Module):
+        def __init__(self) -> None:
+            super().__init__()
+            self.lin = torch.nn.Linear(3, 1)
+
+        def forward(self, x: torch.Tensor) -> torch.Tensor:
+            return self.lin(x)
+
+    parts = find_torch_parts(type("Est", (), {"module_": Net(), "n_features_in_": 3})())
+    parts.x_mean, parts.x_scale = np.zeros(3), np.ones(3)
+    assert parts is fold_standardisation(parts)
+
+
+def _sliptack(**params: Any) -> StickSlipSpeed:
+    base: dict[str, Any] = {
+        "rate_hz": 1000.0,
+        "window": 1000,
+        "hop": 10,
+        "f_max_range": (15.0, 100.0),
+        "min_peak_ratio": 0.6,
+        "detrend_frames": 300,
+        "n_peaks": 10,
+    }
+    return StickSlipSpeed(**{**base, **params}).fit(
+        np.zeros((1, 1)), np.full(1, np.nan)
+    )
+
+
+@pytest.mark.parametrize(
+    ("params", "most"),
+    [
+        (
+            {
+                "harmonics": "fundamental",
+                "interpolate": True,
+                "min_peak_to_mean": 20.0,
+            },
+            84,
+        ),
+        ({}, 65),
+    ],
+    ids=["shipped", "paper"],
+)
+def test_sliptack_speed_graph_does_not_grow_back(
+    params: dict[str, Any], most: int
+) -> None:
+    """The SlipTack speed graph of the shipped config has at most 84 nodes (96 before issue 16's trim)."""
+    graph = export_stick_slip_speed(_sliptack(**params))
+    assert len(_ops(graph)) <= most
+
+
+def test_baseline_first_into_writes_what_call_returns_as_float32() -> None:
+    """baseline_first's into() writes call()'s float64 difference, rounded to float32."""
+    rng = np.random.default_rng(0)
+    x = rng.normal(2000.0, 50.0, (30, 1, 19))
+    a = Pipeline([{"op": "baseline_first", "frames": 10}], (1, 19), "m").ops[0]
+    b = Pipeline([{"op": "baseline_first", "frames": 10}], (1, 19), "m").ops[0]
+    out = np.zeros((1, 19), np.float32)
+    for frame in x:
+        expected = a(frame).astype(np.float32)
+        b.into(frame, out)
+        np.testing.assert_array_equal(expected, out)
+
+
+def _one_frame_bundle(root: Path) -> tuple[Path, np.ndarray, float]:
+    rng = np.random.default_rng(1)
+    w = rng.normal(size=3)
+    man = manifest(
+        3,
+        window=1,
+        k=1,
+        preprocessing=[{"op": "baseline_first", "frames": 5}],
+    )
+    return write_bundle(root / "b", linear_graph(w, 0.25), man), w, 0.25
+
+
+def test_one_frame_loop_flags_every_nonfinite_frame_and_scores_the_rest(
+    tmp_path: Path,
+) -> None:
+    """A 1-frame window: NaN / +-inf in any channel is flagged, every other frame scores (x - baseline) @ w + b."""
+    path, w, b = _one_frame_bundle(tmp_path)
+    rng = np.random.default_rng(2)
+    frames = rng.normal(size=(60, 3))
+    bad = {20: (0, np.nan), 31: (1, np.inf), 42: (2, -np.inf)}
+    for i, (ch, v) in bad.items():
+        frames[i, ch] = v
+    loop = StreamLoop(load_bundle(path))
+    for i, f in enumerate(frames):
+        loop.step(f, i / 100.0)
+    res = loop.result()
+    # the baseline: the median of the frames so far, until five have arrived
+    base = np.array([np.median(frames[: min(i + 1, 5)], axis=0) for i in range(60)])
+    good = np.array([i for i in range(60) if i not in bad])
+    x = (frames[good] - base[good]).astype(np.float32).astype(np.float64)
+    ref = x @ w + b
+    assert (sorted(bad), ("nonfinite",) * 3) == (
+        res.bad_frame.tolist(),
+        res.bad_reason,
+    )
+    assert good.tolist() == res.frame.tolist()
+    np.testing.assert_allclose(res.score, ref, rtol=1e-5, atol=1e-5)
+
+
+def test_fsr_graph_scores_match_on_a_batch_and_one_window_at_a_time() -> None:
+    """The FSR graph gives the same float32 score for a window alone as inside a batch."""
+    det = FSRTouchSlip(threshold=8.0, polarity="falling").fit(
+        np.full((20, 1), 4.5), np.zeros(20, int)
+    )
+    graph = export_fsr_touch_slip(det, rest=4.5)
+    sess = onnx_session(graph)
+    wins = np.random.default_rng(3).uniform(3.0, 4.6, (50, 10, 1)).astype(np.float32)
+    batch = sess.run(None, {graph.input_name: wins})[0]
+    one = np.concatenate([sess.run(None, {graph.input_name: x[None]})[0] for x in wins])
+    np.testing.assert_array_equal(batch, one)
