@@ -42,6 +42,7 @@ from slipkit.compare.report import write_report
 from slipkit.compare.table import (
     block_p99,
     build_table,
+    quiet_p99,
     seed_table,
     verdict_limits,
 )
@@ -233,6 +234,7 @@ def _run_one(
         "frame_period_us": cost.frame_period_us,
         "within_budget": cost.within_budget,
         "export": cost.note,
+        "p99_quiet_us": quiet_p99(cost.latency_us) if cost.exported else math.nan,
     }
     return row, ev, cost, summary
 

@@ -65,6 +65,7 @@ COST = (
     ("decision_frames", "frames to a decision", "{:.0f}"),
     ("p50_us", "p50 (us)", "{:.1f}"),
     ("p99_us", "p99 (us)", "{:.1f}"),
+    ("p99_quiet_us", "p99, quietest block (us)", "{:.1f}"),
     ("budget_p99_us", "p99 budget (us)", "{:.4g}"),
     ("within_budget", "within budget", "{}"),
     ("pareto", "Pareto", "{}"),
@@ -112,6 +113,7 @@ NO_SPREAD = frozenset(
     {
         "p50_us",
         "p99_us",
+        "p99_quiet_us",
         "budget_p99_us",
         "frame_period_us",
         "fit_calls",
@@ -197,9 +199,27 @@ def deploy_lines(
     passed = [(e, w) for e, w in choice.passed_over if e != str(best["estimator"])]
     if passed:
         out += ["", "Passed over (higher or equal score):", ""]
-        out += [f"- `{e}`: {w}" for e, w in passed]
+        out += [f"- `{e}`: {w}{_load_note(df, e, w)}" for e, w in passed]
     out += ["", TIMING_RULE]
     return out
+
+
+def _load_note(df: pd.DataFrame, estimator: str, why: str) -> str:
+    """For a row passed over on its p99: whether its quietest block met the budget (the
+    machine's load, not the estimator, put it over: re-measure on an idle machine)."""
+    if not why.startswith("p99 ") or "p99_quiet_us" not in df:
+        return ""
+    row = df[df["estimator"].astype(str) == estimator]
+    if row.empty:
+        return ""
+    quiet = float(row["p99_quiet_us"].iloc[0])
+    budget = float(row["budget_p99_us"].iloc[0])
+    if not (math.isfinite(quiet) and math.isfinite(budget)) or quiet > budget:
+        return ""
+    return (
+        f" (its quietest block's p99 {quiet:.1f} us meets the budget: the machine's "
+        "load put it over; re-measure on an idle machine)"
+    )
 
 
 def _over_seeds(row: pd.Series) -> str:
@@ -217,7 +237,8 @@ TIMING_RULE = (
     "timed decisions (all seeds' decisions pooled), so one stall of a shared machine does "
     "not decide; a row is within budget when that p99 <= the budget, and a margin between "
     f"{BORDERLINE:.2f} and {1 / BORDERLINE:.2f} x the budget is flagged borderline (a "
-    "re-measure on another machine may land on the other side)."
+    "re-measure on another machine may land on the other side), and a row over budget "
+    "whose quietest block meets it is marked as put over by the machine's load."
 )
 
 
