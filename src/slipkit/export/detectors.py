@@ -388,8 +388,7 @@ def export_fsr_touch_slip(
     rest_sig = v_rest if coeffs is None else float(np.polyval(coeffs, v_rest))
 
     g = GraphBuilder("fsr_touch_slip", opset)
-    inp, x = _prologue(g, w, 1)
-    v = g.op("Reshape", x, g.const([-1, w], np.int64), stem="v")
+    inp, v = _prologue(g, w, 1)  # (batch, w, 1): each branch reshapes as it needs
     if coeffs is not None:
         # eq. 6 by Horner's rule, as numpy.polyval evaluates it
         acc = g.op("Mul", v, g.const(coeffs[0], np.float64))
@@ -402,16 +401,16 @@ def export_fsr_touch_slip(
             g, inp, score64, detector, w, v_rest, rest_sig, delta, gate, polarity, sign
         )
     # One MatMul gives both block statistics (few nodes: node dispatch, not arithmetic,
-    # dominates a batch-1 call): column 0 the signed derivative of the two block means,
-    # column 1 ``-sign * mean(last block)``, whose zero weights on the previous block
+    # dominates a batch-1 call): row 0 the signed derivative of the two block means,
+    # row 1 ``-sign * mean(last block)``, whose zero weights on the previous block
     # still turn a NaN / inf anywhere in the window into NaN (0 * NaN = 0 * inf = NaN),
     # so the gate ``press > delta`` (``sign (rest - last) > delta``) is also the
     # finiteness test.
-    cols = np.zeros((w, 2))
-    cols[:b, 0] = -sign * per_s / b
-    cols[b:, 0] = sign * per_s / b
-    cols[b:, 1] = -sign / b
-    stats = g.op("MatMul", v, g.const(cols, np.float64), stem="block_stats")
+    rows = np.zeros((2, w))  # (2, w) @ (batch, w, 1) -> (batch, 2, 1)
+    rows[0, :b] = -sign * per_s / b
+    rows[0, b:] = sign * per_s / b
+    rows[1, b:] = -sign / b
+    stats = g.op("MatMul", g.const(rows, np.float64), v, stem="block_stats")
     deriv, press = g._fresh("deriv"), g._fresh("press")
     split = {"num_outputs": 2} if g.opset >= 18 else {}
     g.nodes.append(helper.make_node("Split", [stats], [deriv, press], axis=1, **split))

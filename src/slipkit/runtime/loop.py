@@ -321,18 +321,18 @@ class StreamLoop:
         self._bad_byte = b"\x01" if self.nan_is_missing else b"\x00"
         self._finite = np.zeros(m.frame.shape, dtype=bool)
         self._windows = [self._ring[j : j + self._w] for j in range(self._w)]
+        # Row views made once: indexing the ring per frame costs a view each time.
+        self._rows = list(self._ring)
         self._ops = list(bundle.preprocessing.ops)
-        # A last step that can write into the graph input directly (``into``, e.g.
-        # baseline_first) saves the copy of its output buffer per decision.
-        self._into = getattr(self._ops[-1], "into", None) if self._ops else None
-        self._head_ops = self._ops[:-1] if self._into is not None else self._ops
         (inp,) = m.inputs
         assert inp.dtype is not None
         self._input = np.zeros(inp.static_shape, dtype=np.dtype(inp.dtype))
         # The graph input seen in the preprocessing's output shape (same values, a
         # view): writing the window into it needs no reshape per frame.
         self._input_view = self._input.reshape(bundle.preprocessing.out_shape)
-        self._input_finite = np.zeros(self._input.shape, dtype=bool)
+        # The check runs on a flat view (a 1-D ufunc call is the cheaper one).
+        self._input_flat = self._input.reshape(-1)
+        self._input_finite = np.zeros(self._input.size, dtype=bool)
         self._feed = {inp.name: self._input}
         d = m.decision
         self._out_names = [d.output]
@@ -463,10 +463,11 @@ class StreamLoop:
             and values.shape == self._shape
             and values.dtype.kind in "fiu"
         ):
-            ring[p] = values
+            row = self._rows[p]
+            row[...] = values
             if w > 1:  # the copy that keeps every window contiguous; none for one frame
                 ring[p + w] = values
-            self._check(ring[p], out=self._finite)
+            self._check(row, out=self._finite)
             # A bytes search is the cheapest exact any/all on a small bool array.
             if self._bad_byte in self._finite.tobytes():
                 bad = "nonfinite"
@@ -496,13 +497,10 @@ class StreamLoop:
             self._run = 0
             return None
         x = self._windows[p]
-        for op in self._head_ops:
+        for op in self._ops:
             x = op(x)
-        if self._into is None:
-            self._input_view[...] = x
-        else:
-            self._into(x, self._input_view)
-        self._check(self._input, out=self._input_finite)
+        self._input_view[...] = x
+        self._check(self._input_flat, out=self._input_finite)
         if self._bad_byte in self._input_finite.tobytes():
             # A finite frame can still overflow float32 after preprocessing (or an
             # op can make a NaN); a graph fed an infinity can return a finite but

@@ -312,29 +312,21 @@ class _BaselineFirst:
         """Forget the baseline (a new stream, e.g. the next grasp)."""
         self._count = 0
         self._started = False
-        self._base = np.zeros(self.out_shape[1:])
-
-    def _collect(self, x: Array) -> None:
-        new = x if not self._started else x[max(len(x) - self.hop, 0) :]
-        self._started = True
-        take = min(self.n - self._count, len(new))
-        self._seen[self._count : self._count + take] = new[:take]
-        self._count += take
-        self._base = np.median(self._seen[: self._count], axis=0)
+        # The baseline repeated over the window's frames: a subtraction of equal
+        # shapes skips numpy's broadcasting setup (~0.4 us per call on a 1 x 19 BioTac
+        # window, a tenth of a force model's whole loop step).
+        self._base = np.zeros(self.out_shape)
 
     def __call__(self, x: Array) -> Array:
         if self._count < self.n:
-            self._collect(x)
+            new = x if not self._started else x[max(len(x) - self.hop, 0) :]
+            self._started = True
+            take = min(self.n - self._count, len(new))
+            self._seen[self._count : self._count + take] = new[:take]
+            self._count += take
+            self._base[...] = np.median(self._seen[: self._count], axis=0)
         np.subtract(x, self._base, self._buf)
         return self._buf
-
-    def into(self, x: Array, out: Array) -> None:
-        """``__call__`` written straight into ``out`` (e.g. the float32 graph input):
-        the same float64 difference, rounded once on the way in, and no copy of the
-        op's own buffer (``StreamLoop`` uses it for a last step)."""
-        if self._count < self.n:
-            self._collect(x)
-        np.subtract(x, self._base, out, casting="unsafe")
 
 
 @register_op("baseline_first")
