@@ -20,12 +20,15 @@ percentile) with the ratios, the paper's figures (TacTip SVM 3 ms per frame, Jam
 et al. 2018; FSR 4.9 ms only when an FSR bundle exists) and the sensor budget.
 
     .venv/bin/python benchmarks/bench_deploy.py [--rounds 5] [--frames 2000] [--keep DIR]
-        [--only NAME ...] [--before DIR]
+        [--only NAME ...] [--before DIR] [--before-loop FILE]
 
 ``--before DIR`` (a folder of ``<family>/model.onnx``, e.g. an earlier run's ``--keep``
 folder's ``exports``) adds a row per family with that earlier graph's bare call,
 timed in the same rounds on the same inputs: a graph change before and after, side by
-side in one run. The floor of a "before" row is the current graph's.
+side in one run. ``--before-loop FILE`` (an earlier ``slipkit/runtime/loop.py``) runs
+that version's ``StreamLoop`` on the earlier graph too, for the row's loop column
+(preprocessing ops are this checkout's in both). The floor of a "before" row is the
+current graph's; "budget" and "met" are left to the current row.
 """
 
 from __future__ import annotations
@@ -256,6 +259,42 @@ def _bound(sess: Any, in_name: str, out_name: str, shape: list[int]) -> Any:
     return call
 
 
+def profile_nodes(
+    model_path: Path, options: Any, inputs: np.ndarray, top: int = 6
+) -> list[str]:
+    """The ``top`` slowest nodes by onnxruntime's profiler (median us over the calls).
+
+    The profiler adds its own ~1-2 us per node, so the absolute values are high; the
+    order says where a batch-1 call's time goes. Prints the total node count too.
+    """
+    import collections
+    import json as _json
+
+    import onnxruntime as ort
+
+    with tempfile.TemporaryDirectory() as tmp:
+        options.enable_profiling = True
+        options.profile_file_prefix = str(Path(tmp) / "prof")
+        sess = ort.InferenceSession(
+            str(model_path), options, providers=["CPUExecutionProvider"]
+        )
+        name = sess.get_inputs()[0].name
+        for x in inputs:
+            sess.run(None, {name: x[None]})
+        events = _json.loads(Path(sess.end_profiling()).read_text())
+    per: dict[tuple[str, str], list[int]] = collections.defaultdict(list)
+    for e in events:
+        if e.get("cat") == "Node" and e["name"].endswith("_kernel_time"):
+            per[(e["args"]["op_name"], e["name"][: -len("_kernel_time")])].append(
+                e["dur"]
+            )
+    ranked = sorted(((float(np.median(v)), k) for k, v in per.items()), reverse=True)
+    total = sum(t for t, _ in ranked)
+    return [f"{len(ranked)} nodes, profiled sum {total:.0f} us"] + [
+        f"{op} {node}: {t:.0f} us" for t, (op, node) in ranked[:top]
+    ]
+
+
 def _median(
     stats: dict[str, list[tuple[float, float]]],
 ) -> dict[str, tuple[float, ...]]:
@@ -278,7 +317,35 @@ def main() -> None:
         "each family's earlier graph is timed too (bare call, same inputs and session "
         "options, in the same rounds) and printed as a 'before' row",
     )
+    ap.add_argument(
+        "--before-loop",
+        type=Path,
+        default=None,
+        help="an earlier slipkit/runtime/loop.py (e.g. `git show <commit>:src/slipkit/"
+        "runtime/loop.py > old_loop.py`): its StreamLoop runs each bundle too (on the "
+        "--before graph when given), timed in the same rounds, as the 'before' row's loop",
+    )
+    ap.add_argument(
+        "--profile-nodes",
+        action="store_true",
+        help="also print each bundle's slowest graph nodes (onnxruntime profiler, 300 "
+        "calls; the profiler's own cost inflates every node)",
+    )
     args = ap.parse_args()
+    old_loop_cls = None
+    if args.before_loop is not None:
+        import importlib.util
+        import sys
+
+        spec = importlib.util.spec_from_file_location(
+            "slipkit.runtime._before_loop", args.before_loop
+        )
+        assert spec is not None
+        assert spec.loader is not None
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = mod
+        spec.loader.exec_module(mod)
+        old_loop_cls = mod.StreamLoop
 
     import onnxruntime as ort
     import torch
@@ -378,6 +445,15 @@ def main() -> None:
             )
             old_bare = _bound(old_sess, inp.name, m.decision.output, [1, *in_shape])
             part["before"] = []
+        old_loop = None
+        if old_loop_cls is not None:
+            from dataclasses import replace
+
+            old_bundle = (
+                bundle if old_bare is None else replace(bundle, session=old_sess)
+            )
+            old_loop = old_loop_cls(old_bundle)
+            part["before_loop"] = []
         if svm:
             # The SVM part alone (features in), as the issue's reference figures.
             svm_graph = export(model)
@@ -400,6 +476,11 @@ def main() -> None:
             stats["bare"].append(_pct(_time_calls(bare, x32)))
             if old_bare is not None:
                 part["before"].append(_pct(_time_calls(old_bare, x32)))
+            if old_loop is not None:
+                old_loop.reset()
+                for values, ts in zip(frames, times.tolist(), strict=True):
+                    old_loop.step(values, ts)
+                part["before_loop"].append(_pct(old_loop.result().latency_ns))
             stats["native"].append(_pct(_time_calls(native, inputs[:300])))
             if module is not None:
                 stats["torch"].append(_pct(_time_calls(eager, x32[:1000])))
@@ -440,20 +521,35 @@ def main() -> None:
             }
         )
         n_nodes = len(graph.model.graph.node)
-        if old_bare is not None:
+        if args.profile_nodes:
+            lines = profile_nodes(
+                bundle_dir / "model.onnx", bundle.session_spec.options(), x32[:300]
+            )
+            notes.append(f"{name} profile: " + "; ".join(lines))
+        if old_bare is not None or old_loop is not None:
             import onnx
 
-            old_nodes = len(onnx.load(str(old_path)).graph.node)
-            notes.append(f"{name}: {n_nodes} graph nodes (before: {old_nodes})")
+            pm_before = _median(part)
+            if old_bare is not None:
+                assert old_path is not None
+                old_nodes = len(onnx.load(str(old_path)).graph.node)
+                notes.append(f"{name}: {n_nodes} graph nodes (before: {old_nodes})")
+                what = f"{old_nodes}-node graph of --before"
+                old_flops = graph_flops(old_path.read_bytes(), None)
+            else:
+                notes.append(f"{name}: {n_nodes} graph nodes")
+                what, old_flops = "this graph", flops
+            if old_loop is not None:
+                what += ", loop of --before-loop"
             rows.append(
                 {
-                    "model": f"{name}: before ({old_nodes}-node graph of --before)",
-                    "loop": None,
-                    "bare": _median(part)["before"],
+                    "model": f"{name}: before ({what})",
+                    "loop": pm_before.get("before_loop"),
+                    "bare": pm_before.get("before", med["bare"]),
                     "native": med["native"],
                     "torch": None,
                     "identity": med["identity"][0],
-                    "flops": graph_flops(old_path.read_bytes(), None),
+                    "flops": old_flops,
                     "numpy": None,
                     "floor": floor,
                     "paper": None,
@@ -512,7 +608,11 @@ def main() -> None:
             "-" if paper is None else f"{paper:.0f}",
             "-" if paper is None or loop_r is None else f"{paper / loop_r[0]:.0f}x",
             "-" if r["budget"] is None else f"{r['budget']:.0f}",
-            "-" if loop_r is None else "yes" if loop_r[1] <= r["budget"] else "NO",
+            "-"
+            if loop_r is None or r["budget"] is None
+            else "yes"
+            if loop_r[1] <= r["budget"]
+            else "NO",
         ]
         print("| " + " | ".join(cells) + " |")
     print()
