@@ -235,6 +235,7 @@ def test_fsr_runtime_hop_of_five_lands_on_the_detector_block_ends(
             "hop": graph.hop,
             "rate_hz": 2000.0,
         },
+        "preprocessing": [dict(s) for s in graph.preprocessing],  # press_sign
         "inputs": [{"name": graph.input_name, "dtype": "float32", "shape": [1, 10, 1]}],
         "outputs": [{"name": "score", "dtype": "float32"}],
         "decision": decision,

@@ -60,10 +60,12 @@ Per task
     Frame = one raw sample of ``task.stream`` (``task.channels``); window and hop are
     what the detector's graph needs (:class:`slipkit.export.detectors.DetectorGraph`,
     e.g. FSR: 10 samples every 5), no preprocessing (the detector's math is in the
-    graph), except for an FSR detector whose polarity is ``per_recording``: one step,
-    ``press_sign``, latches the stream's rest level and wiring sign at its first
-    press. Slip class ``1`` (the detector's positive class); parity is the
-    detectors' own check on the held-out recordings (through that step).
+    graph), except for a voltage-input FSR detector: one step, ``press_sign``, takes
+    the stream's rest level from its first samples, as the batch detector does per
+    recording, with the fitted polarity's sign or, for ``per_recording``, the wiring
+    sign latched at its first press. Slip class ``1`` (the detector's positive
+    class); parity is the detectors' own check on the held-out recordings (through
+    that step).
 ``DavisRelease``
     Frame = one 10 ms event frame ``[2, H, W]`` (positive and negative counts per
     pixel), window 1, hop 1. One preprocessing step, ``davis_areas`` (the detector's
@@ -877,23 +879,25 @@ def _deploy_detection(
     steps: list[dict[str, Any]] = []
     from slipkit.baselines.fsr import FSRTouchSlip
 
-    if (
-        isinstance(run.model, FSRTouchSlip)
-        and run.model.input == "voltage"
-        and getattr(run.model, "polarity_", None) == "per_recording"
-    ):
-        # Training wirings of both signs: the runtime learns each stream's rest level
-        # and press direction at its first press (the press_sign op), as the batch
-        # detector does per recording; the graph reads the sign-normalised signal.
+    if isinstance(run.model, FSRTouchSlip) and run.model.input == "voltage":
+        # The runtime takes each stream's rest level from its first samples (the
+        # press_sign op), as the batch detector does per recording, so a stream of the
+        # other wiring is never touched, as in the batch detector (issue 14); training
+        # wirings of both signs: the press direction is latched at its first press
+        # too. The graph reads the sign-normalised signal (export_fsr_touch_slip).
         from slipkit.export.detectors import fsr_press_sign_step
 
         steps = [fsr_press_sign_step(run.model)]
+        sign = (
+            f"wiring sign (its first block mean further than {steps[0]['delta']:g} V "
+            "from rest), as the detector's per-recording polarity"
+            if "sign" not in steps[0]
+            else f"the fitted polarity's sign ({run.model.polarity_})"
+        )
         notes.append(
             "press_sign: the stream's rest level (mean of its first "
-            f"{run.model.rest_samples} samples) and wiring sign (its first block mean "
-            f"further than {steps[0]['delta']:g} V from rest) latched on the gripper "
-            "PC, as the detector's per-recording polarity; start the loop (or reset "
-            "it) at rest before each grasp"
+            f"{run.model.rest_samples} samples) and {sign}, latched on the gripper "
+            "PC; start the loop (or reset it) at rest before each grasp"
         )
     return Deployment(
         # window and hop come from the graph (DetectorGraph.window / .hop)

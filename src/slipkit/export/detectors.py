@@ -13,14 +13,15 @@ the only rounding that differs from the batch detector is the float32 input.
 
 * :class:`~slipkit.baselines.fsr.FSRTouchSlip` -- ``W = 2 block`` (10): the two
   block means, their backward difference over the cycle time, one sign, the touch
-  gate against a **fixed rest voltage** (a calibration constant in the graph; the
-  batch detector averages each recording's first 10 samples). Decision instants are
-  block ends: ``hop = block`` (5). With ``polarity_ == "per_recording"`` (training
-  wirings of both signs) the rest level and the sign come from the stream instead:
-  the runtime op ``press_sign`` latches them at the first press, as the batch
-  detector does per recording, and the graph reads ``sign * (v - v_rest)`` with rest
-  0 and the paper's sign (:func:`fsr_press_sign_step`); its rest and gate are then
-  the recording's own, not a constant.
+  gate. Decision instants are block ends: ``hop = block`` (5). The batch detector
+  averages each recording's first 10 samples into its rest level; for voltage input
+  the runtime op ``press_sign`` does the same per stream (:func:`fsr_press_sign_step`),
+  with the fitted polarity's sign, or, for ``polarity_ == "per_recording"`` (training
+  wirings of both signs), the sign latched at the stream's first press, and the graph
+  reads ``sign * (v - v_rest)`` with rest 0 and the paper's sign: its rest and gate
+  are the recording's own, so a recording of the other wiring is never touched, as
+  in the batch detector (issue 14). Force input, or an explicit ``rest=...``: the
+  gate is against a **fixed rest voltage**, a calibration constant in the graph.
 * :class:`~slipkit.baselines.biotac.ForceDerivative` -- ``W = span + 1`` (4):
   ``Ft = sqrt(fx^2 + fy^2)`` (or ``Ft`` itself) at both ends, ``-(Ft[-1] - Ft[0])
   rate / span``; the same numbers as the batch detector.
@@ -309,20 +310,25 @@ def export_fsr_touch_slip(
     detector : FSRTouchSlip
         Fitted (``threshold_`` is alpha, V/s or N/s).
     rest : float or None
-        The rest voltage ``v_rest`` (V) of the touch gate, a constant of the graph.
-        The batch detector averages the first ``rest_samples`` of every recording,
-        which estimates one sensor constant (the conditioned voltage at zero force);
-        a fixed window cannot see a recording's start, so the graph takes that
-        constant: measured at calibration (the mean of unloaded samples), or None
-        for the detector's ``rest_V_`` (the median rest voltage of its training
-        recordings), or, if that is not finite, the calibration polynomial's
-        zero-force voltage (:func:`slipkit.physics.fsr.rest_voltage`, 4.5 V by
-        default; the paper's falling wiring only). With ``input="force"`` the
-        graph's rest force is ``F(rest)``. The slip sign and the gate follow the
-        detector's fitted ``polarity_``.
+        None (voltage input, with the gate): the rest level comes from the stream,
+        as in the batch detector, which averages the first ``rest_samples`` of every
+        recording: the graph's ``preprocessing`` is the runtime op ``press_sign``
+        (:func:`fsr_press_sign_step`) and the graph reads ``sign * (v - v_rest)``.
+        A float: the rest voltage ``v_rest`` (V) of the touch gate as a constant of
+        the graph (measured at calibration, the mean of unloaded samples), no
+        preprocessing; the graph then differs from the batch detector wherever a
+        recording's rest mean differs from it (a recording of the other wiring is
+        touched all along). Force input, or ``gate=False``, with None: the detector's
+        ``rest_V_`` (the median rest voltage of its training recordings), or, if that
+        is not finite, the calibration polynomial's zero-force voltage
+        (:func:`slipkit.physics.fsr.rest_voltage`, 4.5 V by default; the paper's
+        falling wiring only). With ``input="force"`` the graph's rest force is
+        ``F(rest)``. The slip sign and the gate follow the detector's fitted
+        ``polarity_``.
     gate : bool
         False leaves the touch gate out: the score is the signed block derivative at
-        every block (untouched blocks then get a score, not ``NO_SCORE``).
+        every block (untouched blocks then get a score, not ``NO_SCORE``); no rest
+        level is needed, so there is no ``press_sign`` step.
     opset : int
         Default-domain opset (17 or 18).
 
@@ -338,6 +344,8 @@ def export_fsr_touch_slip(
     per_recording = (
         detector.input == "voltage" and detector._polarity == "per_recording"
     )
+    # voltage input with the gate: the rest level comes from the stream (press_sign)
+    stream_rest = detector.input == "voltage" and gate and rest is None
     if per_recording and rest is not None:
         raise ExportError(
             "FSR export: polarity 'per_recording' takes each recording's rest level "
@@ -361,14 +369,14 @@ def export_fsr_touch_slip(
     n_blocks = wb + 2 * gap + 1 if confirm else 2
     w = n_blocks * b
     polarity = detector._polarity
-    # per recording: the press_sign op feeds sign * (v - rest), a falling-wiring signal
-    # at rest 0, so the graph is the paper's with slip sign +1 and rest 0
-    sign = 1.0 if per_recording else detector._sign
+    # rest from the stream: the press_sign op feeds sign * (v - rest), a falling-wiring
+    # signal at rest 0, so the graph is the paper's with slip sign +1 and rest 0
+    sign = 1.0 if stream_rest else detector._sign
     per_s = detector._per_s
     delta = float(getattr(detector, "delta_", detector._delta))
     coeffs = detector._coeffs() if detector.input == "force" else None
     fitted_rest = float(getattr(detector, "rest_V_", math.nan))
-    if per_recording:
+    if stream_rest:
         v_rest = 0.0
     elif rest is not None:
         v_rest = float(rest)
@@ -398,7 +406,18 @@ def export_fsr_touch_slip(
     if confirm:
         score64 = _fsr_confirmed(g, v, detector, n_blocks, rest_sig, delta, sign)
         return _fsr_graph_out(
-            g, inp, score64, detector, w, v_rest, rest_sig, delta, gate, polarity, sign
+            g,
+            inp,
+            score64,
+            detector,
+            w,
+            v_rest,
+            rest_sig,
+            delta,
+            gate,
+            polarity,
+            sign,
+            stream_rest=stream_rest,
         )
     # One MatMul gives both block statistics (few nodes: node dispatch, not arithmetic,
     # dominates a batch-1 call): row 0 the signed derivative of the two block means,
@@ -430,7 +449,18 @@ def export_fsr_touch_slip(
         stem="score64",
     )
     return _fsr_graph_out(
-        g, inp, score64, detector, w, v_rest, rest_sig, delta, gate, polarity, sign
+        g,
+        inp,
+        score64,
+        detector,
+        w,
+        v_rest,
+        rest_sig,
+        delta,
+        gate,
+        polarity,
+        sign,
+        stream_rest=stream_rest,
     )
 
 
@@ -544,6 +574,8 @@ def _fsr_graph_out(
     gate: bool,
     polarity: str,
     sign: float,
+    *,
+    stream_rest: bool,
 ) -> DetectorGraph:
     b = int(detector.block)
     per_recording = polarity == "per_recording" and detector.input == "voltage"
@@ -557,7 +589,7 @@ def _fsr_graph_out(
     )
     against = (
         "the recording's own rest level, sign-normalised by the press_sign op"
-        if per_recording
+        if stream_rest
         else f"v_rest = {v_rest:g} V"
     )
     model = _finish(
@@ -582,7 +614,7 @@ def _fsr_graph_out(
             + (
                 "the derivative, against the recording's own press, of the block "
                 if per_recording
-                else f"{'rising' if sign > 0 else 'falling'} {detector.input} "
+                else f"{'rising' if detector._sign > 0 else 'falling'} {detector.input} "
                 "derivative of the block "
             )
             + f"means ({unit}); {NO_SCORE:g} (the detector's -inf) "
@@ -596,6 +628,11 @@ def _fsr_graph_out(
                 ", after press_sign: sign * (v - v_rest) with the recording's own rest "
                 "and press direction (0 before its first press)"
                 if per_recording
+                else (
+                    f", after press_sign: {detector._sign:+g} * (v - v_rest) with the "
+                    "recording's own rest (0 until its rest period has passed)"
+                )
+                if stream_rest
                 else ""
             )
         ),
@@ -608,35 +645,45 @@ def _fsr_graph_out(
             "block": b,
             "rate_hz": float(detector.rate_hz),
             "gate": bool(gate),
-            "rest_V": None if per_recording else v_rest,
+            # None: the rest level comes from the stream (the press_sign step)
+            "rest_V": None if stream_rest else v_rest,
             "rest_signal": rest_sig,
             "delta": delta,
         },
         scipy=scipy.__version__,
     )
-    if not per_recording:
+    if not stream_rest:
         return graph
     return replace(graph, preprocessing=(fsr_press_sign_step(detector),))
 
 
 def fsr_press_sign_step(detector: FSRTouchSlip) -> dict[str, Any]:
-    """The runtime step that learns a recording's wiring from its stream (``press_sign``).
+    """The runtime step that takes a recording's rest level from its stream (``press_sign``).
 
-    For a fitted :class:`FSRTouchSlip` with ``polarity_ == "per_recording"``: the rest
-    level is the mean of the recording's first ``rest_samples`` finite samples, and
-    the first block mean (of ``block`` samples, from the first block after the rest
-    period) further than ``delta`` (V) from it sets the sign, as the batch detector
-    does (``FSRTouchSlip._block_stats``). The graph's calls are every ``block``
-    samples.
+    For a fitted voltage-input :class:`FSRTouchSlip`: the rest level is the mean of
+    the recording's first ``rest_samples`` finite samples, as the batch detector's
+    (``FSRTouchSlip._block_stats``). A fixed ``polarity_`` gives the step's ``sign``
+    (+1 falling, -1 rising: the slip sign of the voltage); with ``"per_recording"``
+    the sign is 0, and the first block mean (of ``block`` samples, from the first
+    block after the rest period) further than ``delta`` (V) from rest sets it, as the
+    batch detector does. The graph's calls are every ``block`` samples.
     """
     check_is_fitted(detector, "threshold_")
-    return {
+    if detector.input != "voltage":
+        raise ExportError(
+            "FSR export: the press_sign step reads the voltage; a force-input detector "
+            "keeps its rest force in the graph"
+        )
+    step: dict[str, Any] = {
         "op": "press_sign",
         "rest_frames": int(detector.rest_samples),
         "block": int(detector.block),
         "hop": int(detector.block),
         "delta": float(getattr(detector, "delta_", detector._delta)),
     }
+    if detector._polarity != "per_recording":
+        step["sign"] = int(detector._sign)
+    return step
 
 
 # -- BioTac force derivative --------------------------------------------------------------
@@ -1096,9 +1143,10 @@ def _fsr_gate_margin(
     """|press - delta| of the batch detector at ``inst`` and |graph rest - recording rest|."""
     spec = graph.features or {}
     b = int(spec["block"])
-    if spec.get("polarity") == "per_recording" and detector.input == "voltage":
-        # the press_sign op gives the graph this recording's own rest and sign: the
-        # batch detector's press per block, at the instants (block ends)
+    if any(st.get("op") == "press_sign" for st in graph.preprocessing):
+        # the press_sign op gives the graph this recording's own rest (and, per
+        # recording, its sign): the batch detector's press per block, at the instants
+        # (block ends)
         _, press_b = detector._block_stats(x[:, 0])
         blk = (inst - (b - 1)) // b
         press_i = np.full(len(inst), np.nan)
@@ -1156,7 +1204,9 @@ def check_detector_parity(
         FSR graphs with the touch gate: a disagreement also passes when the batch
         detector's ``press`` lies within ``gate_eps`` of ``delta`` (V or N), i.e. the
         gate flipped because the graph's fixed rest differs from the recording's
-        rest mean. Default: the largest such difference over the recordings.
+        rest mean. Default: the largest such difference over the recordings; with the
+        rest from the stream (``press_sign``) no rest differs, and the default is one
+        float32 step of the largest ``|v - rest|`` (the graph's float32 input).
     session : onnxruntime.InferenceSession, optional
         Reuse a session (else CPU, one thread).
 

@@ -48,15 +48,19 @@ op                           parameters, effect
                              :func:`slipkit.baselines.davis.clean_frame`
                              (opening, closing, 8-connected area filter)
 ``press_sign``               ``rest_frames``, ``block``, ``hop`` (int >= 1, hop a
-                             multiple of block), ``delta`` (> 0): one channel
+                             multiple of block), ``delta`` (> 0), ``sign``
+                             (optional: +1, -1 or 0, default 0): one channel
                              ``(w, 1)`` -> ``sign * (x - rest)``, the rest level
-                             and the press direction latched from the *stream*
-                             (stateful): ``rest`` the mean of its first
-                             ``rest_frames`` finite frames, ``sign`` set by its
-                             first block mean further than ``delta`` from rest
-                             (+1 when below it); zeros until then. The FSR
-                             detector's per-recording polarity
-                             (:class:`slipkit.baselines.fsr.FSRTouchSlip`)
+                             (and, for ``sign`` 0, the press direction) latched
+                             from the *stream* (stateful): ``rest`` the mean of
+                             its first ``rest_frames`` finite frames; ``sign``
+                             fixed (+1: the voltage falls under a press, -1: it
+                             rises) or, for 0, set by the stream's first block
+                             mean further than ``delta`` from rest (+1 when below
+                             it); zeros until both are known. The FSR detector's
+                             per-stream rest level
+                             (:class:`slipkit.baselines.fsr.FSRTouchSlip`, voltage
+                             input; ``sign`` 0 for ``polarity="per_recording"``)
 ===========================  =====================================================
 """
 
@@ -579,11 +583,12 @@ def _davis_areas(f: Fields, in_shape: tuple[int, ...]) -> Op:
     return _DavisAreas(params, in_shape)
 
 
-# -- FSR press polarity: the wiring's sign learned from the stream ---------------------------
-# FSRTouchSlip(polarity="per_recording") sets each recording's sign from its first press
-# (slipkit.baselines.fsr). A graph holds constants only, so the rest level and the sign
-# are latched here, in numpy, and the graph reads the sign-normalised signal (rest 0, a
-# press falling, slip rising: the paper's wiring).
+# -- FSR press polarity: the rest level (and the wiring's sign) learned from the stream ------
+# FSRTouchSlip takes each recording's rest level from its first samples and, with
+# polarity="per_recording", its sign from its first press (slipkit.baselines.fsr). A
+# graph holds constants only, so the rest level and the sign are latched here, in numpy
+# (a fixed polarity gives the sign), and the graph reads the sign-normalised signal
+# (rest 0, a press falling, slip rising: the paper's wiring).
 
 
 def _left_mean(values: Array) -> float:
@@ -601,24 +606,33 @@ def _left_mean(values: Array) -> float:
 
 
 class _PressSign:
-    """One channel ``(w, 1)`` -> ``sign * (x - rest)`` with both latched from the stream.
+    """One channel ``(w, 1)`` -> ``sign * (x - rest)`` with both taken from the stream.
 
     The first call sees the stream's first ``w`` frames; each later call ``hop`` new
     ones (the loop calls every ``hop`` frames). ``rest`` is the mean of the first
-    ``rest_frames`` finite frames. Then each call looks at the complete ``block``-frame
-    means of its window that lie wholly after the rest period (stream block
-    ``ceil(rest_frames / block)`` on, at least block 1; blocks are aligned to the
-    stream's first frame, as the window is): the first one further than ``delta`` from
-    ``rest`` latches ``sign`` (+1 when below rest, -1 when above). Every block of the
-    window is looked at, not only the new ones, so a window the loop skipped (a flagged
-    frame) loses no block that is still in the next window. Until the latch the output
-    is zeros (untouched: the graph's touch gate scores it NO_SCORE).
+    ``rest_frames`` finite frames. A fixed ``sign`` (+1 or -1, a known wiring) is used
+    as soon as ``rest`` is known. Otherwise (``sign`` 0) each call looks at the
+    complete ``block``-frame means of its window that lie wholly after the rest period
+    (stream block ``ceil(rest_frames / block)`` on, at least block 1; blocks are
+    aligned to the stream's first frame, as the window is): the first one further than
+    ``delta`` from ``rest`` latches ``sign`` (+1 when below rest, -1 when above). Every
+    block of the window is looked at, not only the new ones, so a window the loop
+    skipped (a flagged frame) loses no block that is still in the next window. Until
+    both are known (and while ``rest`` is NaN: no finite rest frame) the output is
+    zeros (untouched: the graph's touch gate scores it NO_SCORE).
     """
 
     def __init__(
-        self, rest_n: int, block: int, hop: int, delta: float, in_shape: tuple[int, ...]
+        self,
+        rest_n: int,
+        block: int,
+        hop: int,
+        delta: float,
+        in_shape: tuple[int, ...],
+        sign: float = 0.0,
     ) -> None:
         self.rest_n, self.block, self.hop, self.delta = rest_n, block, hop, delta
+        self.fixed_sign = float(sign)
         self.first_block = max(1, -(-rest_n // block))
         self.out_shape = in_shape
         self._nb = in_shape[0] // block
@@ -627,11 +641,11 @@ class _PressSign:
         self.reset()
 
     def reset(self) -> None:
-        """Forget the rest level and the sign (a new stream, e.g. the next grasp)."""
+        """Forget the rest level and a latched sign (a new stream, e.g. the next grasp)."""
         self._calls = 0
         self._count = 0
         self.rest = math.nan
-        self.sign = 0.0
+        self.sign = self.fixed_sign
 
     def _collect(self, x: Array) -> None:
         new = x[:, 0] if self._calls == 0 else x[max(len(x) - self.hop, 0) :, 0]
@@ -671,7 +685,7 @@ class _PressSign:
         if self.sign == 0.0 and self._count == self.rest_n:
             self._latch(x)
         self._calls += 1
-        if self.sign == 0.0:
+        if self.sign == 0.0 or math.isnan(self.rest):
             self._buf.fill(0.0)
         else:
             np.subtract(x, self.rest, self._buf)
@@ -682,7 +696,7 @@ class _PressSign:
 
 @register_op("press_sign")
 def _press_sign(f: Fields, in_shape: tuple[int, ...]) -> Op:
-    f.only(("op", "rest_frames", "block", "hop", "delta"))
+    f.only(("op", "rest_frames", "block", "hop", "delta", "sign"))
     if len(in_shape) != 2 or in_shape[1] != 1:
         raise f.error(
             "op",
@@ -705,7 +719,8 @@ def _press_sign(f: Fields, in_shape: tuple[int, ...]) -> Op:
             f"blocks; got {block}",
         )
     delta = f.number("delta", positive=True)
-    return _PressSign(rest_n, block, hop, delta, in_shape)
+    sign = f.integer("sign", 0, minimum=-1, maximum=1)
+    return _PressSign(rest_n, block, hop, delta, in_shape, float(sign))
 
 
 # -- the SlipTack spectrum, updated per hop (its own module; registers on import) ------------
