@@ -1,6 +1,7 @@
-"""FSR detectors with a per-recording polarity deploy (issue 14): the runtime op
-``press_sign`` latches each stream's rest level and wiring sign at its first press, as the
-batch detector does per recording, and the graph reads the sign-normalised signal."""
+"""FSR detectors deploy with the stream's own rest level (issue 14): the runtime op
+``press_sign`` takes each stream's rest level from its first samples, as the batch detector
+does per recording, with a fixed polarity's sign or, per recording, the wiring sign latched
+at its first press; the graph reads the sign-normalised signal."""
 
 from __future__ import annotations
 
@@ -222,3 +223,175 @@ def test_fsr_robust_bundle_on_the_hard_scene_decides_as_the_detector_per_stream(
         assert (ref >= thr).tolist() == res.slip.tolist()
         n_slip += int(res.slip.sum())
     assert n_slip > 0
+
+
+# -- a fixed polarity: the rest level from the stream, the sign from fit ---------------------
+@pytest.mark.parametrize("sign", [1, -1])
+def test_press_sign_with_a_fixed_sign_uses_it_from_the_rest_on(sign: int) -> None:
+    """sign * (v - rest) as soon as the rest period has passed, before any press; a
+    press of the other direction latches nothing; reset keeps the fixed sign."""
+    v = np.full(30, 2.0)
+    v[:10] = [2.0, 2.1] * 5  # rest mean 2.05 V
+    v[20:] = 2.05 + sign * 0.5  # a press of the wiring opposite to `sign`
+    pipe = _press_sign(sign=sign)
+    outs = [pipe(v[end - 9 : end + 1][:, None])[:, 0].copy() for end in range(9, 30, 5)]
+    for k, end in enumerate(range(9, 30, 5)):
+        np.testing.assert_allclose(sign * (v[end - 9 : end + 1] - 2.05), outs[k])
+    assert float(sign) == pipe.ops[0].sign  # type: ignore[attr-defined]
+    pipe.ops[0].reset()  # type: ignore[attr-defined]
+    np.testing.assert_allclose(
+        np.zeros(10), pipe(np.full((10, 1), 0.5)).ravel(), atol=0.0
+    )  # a new stream: its own rest (0.5 V), the same sign
+    assert float(sign) == pipe.ops[0].sign  # type: ignore[attr-defined]
+
+
+def test_press_sign_with_a_fixed_sign_and_no_finite_rest_gives_zeros() -> None:
+    """No finite sample in the rest period: no rest level, zeros (never touched)."""
+    v = np.r_[np.full(10, np.nan), np.full(10, 1.0)][:, None]
+    pipe = _press_sign(sign=1)
+    pipe(v[:10])
+    assert [0.0] * 10 == pipe(v[5:15]).ravel().tolist()
+
+
+@pytest.mark.parametrize("value", [2, 0.5, True])
+def test_press_sign_refuses_a_sign_other_than_minus_one_zero_or_one(
+    value: object,
+) -> None:
+    """sign 2, 0.5 or true: BundleError naming preprocessing[0].sign."""
+    with pytest.raises(BundleError, match=r"preprocessing\[0\]\.sign"):
+        _press_sign(sign=value)
+
+
+def _one_wiring_detector(form: str, wiring: str) -> FSRTouchSlip:
+    """Fitted (polarity auto, ROC alpha) on generated slides of one wiring only."""
+    X, y, seg = stack(fsr_trials(100, 3, polarity=wiring, slide=True))
+    det = FSRTouchSlip(**FORMS[form])  # type: ignore[arg-type]
+    return det.fit(X, y, segments=seg)
+
+
+OTHER = {"falling": "rising", "rising": "falling"}
+
+
+@pytest.mark.parametrize("form", sorted(FORMS))
+@pytest.mark.parametrize("wiring", ["falling", "rising"])
+def test_fixed_polarity_graph_through_press_sign_equals_the_detector_on_both_wirings(
+    form: str, wiring: str
+) -> None:
+    """Trained on one wiring (a fixed polarity), the graph after press_sign (the fitted
+    sign, the stream's rest) passes parity on held-out slides and knocks of both
+    wirings; on the other wiring neither side ever decides."""
+    det = _one_wiring_detector(form, wiring)
+    assert wiring == det.polarity_
+    graph = export_fsr_touch_slip(det)
+    step = fsr_press_sign_step(det)
+    assert (1 if wiring == "falling" else -1) == step["sign"]
+    assert (step,) == graph.preprocessing
+    for held in (wiring, OTHER[wiring]):
+        X, _, seg = stack(
+            fsr_trials(200, 2, polarity=held, slide=True)
+            + fsr_trials(500, 1, polarity=held, slide=False)
+        )
+        rep = check_detector_parity(det, graph, X, segments=seg)
+        assert (True, 0) == (rep["passed"], rep["n_finite_mismatch"])
+        fired = bool(np.any(det.decision_function(X, segments=seg) >= det.threshold_))
+        assert (held == wiring) == fired  # the other wiring is never touched
+
+
+def _bundle(graph: Any, path: Path) -> Path:
+    """A bundle of an FSR detector graph with its preprocessing (window 10, hop 5)."""
+    from slipkit.runtime import write_bundle
+
+    decision = {**graph.decision(), "positive": "1"}
+    del decision["threshold"]  # the manifest keeps it at the top level
+    manifest = {
+        "name": "fsr_detector",
+        "frame": {
+            "streams": ["fsr"],
+            "channels": ["voltage"],
+            "shape": [1],
+            "window": graph.window,
+            "hop": graph.hop,
+            "rate_hz": 2000.0,
+        },
+        "preprocessing": [dict(s) for s in graph.preprocessing],
+        "inputs": [
+            {
+                "name": graph.input_name,
+                "dtype": "float32",
+                "shape": [1, graph.window, 1],
+            }
+        ],
+        "outputs": [{"name": "score", "dtype": "float32"}],
+        "decision": decision,
+        "threshold": graph.threshold,
+        "debounce": {"k": 1},
+        "budget_ms": {"frame_period": 0.5, "p99": 0.05},
+        "opset": graph.opset,
+        "producer": graph.producers,
+    }
+    return write_bundle(path, graph.serialize(), manifest)
+
+
+def test_fixed_polarity_bundle_decides_as_the_detector_on_a_recording_of_the_other_wiring(
+    tmp_path: Path,
+) -> None:
+    """Trained on the falling wiring: the bundle, replayed per held-out recording through
+    StreamLoop, decides as the batch detector on both wirings; a graph with a fixed
+    rest constant instead fires on the rising wiring, where the detector never does."""
+    from slipkit.export.detectors import detector_windows, graph_scores
+    from slipkit.export.parity import onnx_session
+    from slipkit.runtime import StreamLoop, load_bundle
+
+    det = _one_wiring_detector("paper", "falling")
+    graph = export_fsr_touch_slip(det)
+    loop = StreamLoop(load_bundle(_bundle(graph, tmp_path / "fsr")))
+    fixed = export_fsr_touch_slip(det, rest=det.rest_V_)  # the graph before issue 14
+    fixed_sess = onnx_session(fixed)
+    n_slip = {"falling": 0, "rising": 0}
+    for wiring in ("falling", "rising"):
+        for tr in fsr_trials(200, 2, polarity=wiring, slide=True):
+            x = tr.v[:, None]
+            loop.reset()
+            for row in x.astype(np.float32):
+                loop.step(row)
+            res = loop.result()
+            later = res.frame >= graph.first_decision
+            ref = det.decision_function(x)[res.frame[later]]
+            assert (ref >= det.threshold_).tolist() == res.slip[later].tolist()
+            n_slip[wiring] += int(res.slip.sum())
+            if wiring == "rising":
+                assert bool(np.all(np.isneginf(det.decision_function(x))))
+                windows, _ = detector_windows(fixed, x)
+                out = fixed_sess.run([fixed.score_output], {fixed.input_name: windows})
+                assert bool(np.any(graph_scores(out[0]) >= det.threshold_))
+    assert 0 < n_slip["falling"]
+    assert 0 == n_slip["rising"]
+
+
+def test_fsr_comparison_of_four_trials_exports_every_estimator(tmp_path: Path) -> None:
+    """slipkit compare comparison=fsr with 4 trials (the demo's size; the 2 training
+    trials have one wiring, a held-out one the other): all four estimators export."""
+    import pandas as pd
+
+    from slipkit.compare.commands import compare_main
+    from slipkit.train.runs import read_run
+
+    out = tmp_path / "fsr"
+    cfg = _compose(
+        "compare",
+        [
+            "comparison=fsr",
+            "comparison.dataset.n_trials=4",
+            "seeds=[0]",
+            f"out={out}",
+            "progress=false",
+            "cost.max_frames=200",
+        ],
+    )
+    compare_main(cfg)
+    df = pd.read_csv(out / "metrics.csv")
+    assert ["fsr_roc", "fsr_paper", "fsr_robust", "window_logreg"] == df[
+        "estimator"
+    ].tolist()
+    assert ["ok"] * 4 == df["export"].tolist()
+    assert "falling" == read_run(out / "runs" / "fsr_paper").model.polarity_
