@@ -44,10 +44,11 @@ rest (rising for ``"falling"``, falling for ``"rising"``), a falling force. For
 ``input="force"`` the calibration must turn a press into a rising force; a calibration
 that does not match the wiring is refused. ``fit`` also records ``rest_V_``, the median
 rest voltage of the training recordings, the constant the ONNX graph's touch gate uses
-for one fixed wiring. With ``"per_recording"`` the deployed detector learns each stream's
-rest level and sign on the gripper PC instead: the runtime op ``press_sign``
-(:mod:`slipkit.runtime.preprocessing`) latches them at the first press as this class does,
-and the graph reads the sign-normalised signal
+for force input. For voltage input the deployed detector takes each stream's rest level
+on the gripper PC, as this class takes each recording's: the runtime op ``press_sign``
+(:mod:`slipkit.runtime.preprocessing`) with the fitted sign or, with
+``"per_recording"``, the sign latched at the first press as this class does, and the
+graph reads the sign-normalised signal
 (:func:`slipkit.export.detectors.export_fsr_touch_slip`).
 
 **Confirmation (``confirm_events``, a slipkit addition against impulsive bumps).** One
