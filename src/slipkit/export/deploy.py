@@ -610,6 +610,17 @@ def _deploy_tactip(
     from slipkit.train.tasks.tactip import TacTipFrames
 
     assert isinstance(task, TacTipFrames)
+    from slipkit.models.svm import TacTipSVM
+
+    if not isinstance(run.model, TacTipSVM):
+        # the deployed graph computes the pin-velocity features itself (export/pins.py)
+        # in front of the SVM's Gemm/Exp graph; other frame classifiers have no such graph
+        raise SlipkitError(
+            f"run {run.path}: a TacTip frame bundle needs a TacTipSVM (the pin features "
+            f"are computed inside its graph); this run's model is "
+            f"{type(run.model).__name__}, which slipkit cannot export for TacTip frames "
+            "(e.g. configs/model/tactip_nystroem.yaml is for benchmarks/bench_scale.py)"
+        )
     stream = task.stream
     rate = _rate(dataset, stream, options)
     channels = list(dataset.streams[stream].channels)

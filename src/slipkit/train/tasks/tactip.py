@@ -274,7 +274,13 @@ def _check_pin_count(model: Any, feats: DatasetFeatures, variant: str) -> None:
 
 
 def _svm_params(model: Any) -> dict[str, Any]:
-    params = {"kernel": getattr(model, "kernel", None), "C": getattr(model, "C", None)}
+    # any frame classifier (e.g. configs/model/tactip_nystroem.yaml, a Pipeline) is
+    # named by its class; the SVM's own parameters are added when it has them
+    params = {
+        "estimator": type(model).__name__,
+        "kernel": getattr(model, "kernel", None),
+        "C": getattr(model, "C", None),
+    }
     gamma = getattr(model, "gamma_", None)
     if gamma is not None:
         params["gamma"] = float(gamma)
@@ -290,9 +296,13 @@ def _summary(metrics: Mapping[str, Any]) -> list[str]:
         f", KS {p['kernel_scale']:.4g} (gamma {p['gamma']:.3g})" if "gamma" in p else ""
     )
     val = metrics["validation"]
+    what = (
+        f"{p['kernel']} SVM on {metrics['variant']} (N={metrics['n_slip']}): C {p['C']:.4g}{ks}"
+        if p.get("kernel") is not None and p.get("C") is not None
+        else f"{p.get('estimator', 'model')} on {metrics['variant']} (N={metrics['n_slip']})"
+    )
     lines = [
-        f"TacTip {p['kernel']} SVM on {metrics['variant']} (N={metrics['n_slip']}): "
-        f"C {p['C']:.4g}{ks}",
+        f"TacTip {what}",
         f"  validation ({val['cv']}, k={val['k']}, training side only): "
         f"{val['scoring']} {val[val['scoring']]:.4f}",
         f"  test frames {test['accuracy'] * 100:.2f} % correct "
