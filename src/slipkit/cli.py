@@ -15,9 +15,10 @@ import os
 import sys
 import tempfile
 import traceback
+import warnings
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any, NoReturn, TextIO
 
 #: subcommand -> ("module:function", one-line help). Each function takes the composed DictConfig.
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
@@ -205,6 +206,40 @@ def _check_flags(sub: str, rest: Sequence[str]) -> None:
         pass
 
 
+@contextlib.contextmanager
+def _each_warning_once(kind: type[Warning]) -> Iterator[None]:
+    """Show each distinct ``kind`` warning (class and text) once while the block runs.
+
+    A warning about the data (e.g. one fixed normal force) is raised on every fit and
+    call. The ``"once"`` filter action cannot hold it back: its registry is cleared
+    whenever the filters change, which every ``warnings.catch_warnings`` block in
+    scikit-learn and joblib does. So the de-duplication sits in ``showwarning``.
+    """
+    seen: set[tuple[type[Warning], str]] = set()
+    shown = warnings.showwarning
+
+    def show(
+        message: Warning | str,
+        category: type[Warning],
+        filename: str,
+        lineno: int,
+        file: TextIO | None = None,
+        line: str | None = None,
+    ) -> None:
+        if issubclass(category, kind):
+            key = (category, str(message))
+            if key in seen:
+                return
+            seen.add(key)
+        shown(message, category, filename, lineno, file, line)
+
+    warnings.showwarning = show
+    try:
+        yield
+    finally:
+        warnings.showwarning = shown
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     """Entry point of the ``slipkit`` console script.
 
@@ -242,7 +277,7 @@ def main(argv: Sequence[str] | None = None) -> None:
 
     from slipkit import config_dir
     from slipkit._options import check_options
-    from slipkit.errors import SlipkitError
+    from slipkit.errors import SlipkitError, SlipkitWarning
 
     try:
         task = _resolve(SUBCOMMANDS[sub][0])
@@ -254,7 +289,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         # escaped to Hydra would be printed with "Error executing job" first.
         try:
             check_options(cfg, sub)
-            return task(cfg)
+            with _each_warning_once(SlipkitWarning):
+                return task(cfg)
         except SlipkitError as exc:
             # Bad input is the user's to fix: say what and where, no traceback.
             _fail(sub, f"error: {exc}", 2)

@@ -34,3 +34,8 @@ class TrainingDataError(SlipkitError, ValueError):
 
 class SourceFormatError(SlipkitError, ValueError):
     """A source file handed to an importer does not have the layout it expects."""
+
+
+class SlipkitWarning(UserWarning):
+    """Base class of slipkit's own warnings (a convention the input breaks, a number that
+    cannot be trusted); the ``slipkit`` command shows each distinct one once per run."""

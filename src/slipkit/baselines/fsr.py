@@ -78,14 +78,14 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
 from slipkit.baselines.base import FloatArray, StreamDetector, segment_bounds
-from slipkit.errors import SlipkitError
+from slipkit.errors import SlipkitError, SlipkitWarning
 from slipkit.physics.fsr import DEFAULT_CALIBRATION
 
 #: The voltage direction under a press for each wiring: -1 falls (the paper), +1 rises.
 PRESS_DIRECTION = {"falling": -1.0, "rising": 1.0}
 
 
-class PolarityWarning(UserWarning):
+class PolarityWarning(SlipkitWarning):
     """Training recordings of both wirings: the detector sets the sign per recording."""
 
 

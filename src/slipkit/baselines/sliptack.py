@@ -48,7 +48,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from slipkit.baselines.base import DetectorStream, StreamDetector, segment_bounds
-from slipkit.errors import SlipkitError, TrainingDataError
+from slipkit.errors import SlipkitError, SlipkitWarning, TrainingDataError
 from slipkit.physics.stick_slip import (
     natural_frequency,
     saturation_frequency,
@@ -67,7 +67,7 @@ PAPER_F_MAX = (15.0, 40.0)
 SPEED_PER_FORCE = 1.0
 
 
-class FixedNormalForceWarning(UserWarning):
+class FixedNormalForceWarning(SlipkitWarning):
     """The speed uses one fixed normal force; its relative error passes 1:1 to the speed."""
 
 
