@@ -207,6 +207,44 @@ class TacTipSensor:
     _arrest_depth: float = 0.0
 
 
+def pin_channels(n_pins: int) -> tuple[str, ...]:
+    """The raw ``pins`` stream's channels in order: ``x0..x{N-1}, y0..y{N-1}``."""
+    n = int(n_pins)
+    return tuple(f"x{i}" for i in range(n)) + tuple(f"y{i}" for i in range(n))
+
+
+def check_frame(detector: Detector, sensor: TacTipSensor, scene_name: str) -> None:
+    """Refuse a detector whose frame is not the sensor's (channels in order, frame rate).
+
+    :meth:`TacTipSensor.frame` makes the raw ``pins`` stream (:func:`pin_channels` of
+    the scene's pin count) at the camera rate; a bundle exported from a run on another
+    pin count or rate reads something else.
+    """
+    if detector.channels is None:
+        return
+    want = pin_channels(len(sensor.trial.rest_xy))
+    got = tuple(detector.channels)
+    if got != want:
+        first = next(
+            (i for i, (a, b) in enumerate(zip(got, want, strict=False)) if a != b),
+            min(len(got), len(want)),
+        )
+        raise SlipkitError(
+            f"closedloop.detectors.{detector.name}: its bundle reads {len(got)} channels, "
+            f"the closed loop's configs/scene/{scene_name}.yaml makes {len(want)} pin "
+            f"channels ({want[0]}..{want[-1]}); they first differ at position {first}"
+        )
+    rate = sensor.model.rate_hz
+    if detector.rate_hz is not None and not math.isclose(
+        float(detector.rate_hz), float(rate), rel_tol=1e-6
+    ):
+        raise SlipkitError(
+            f"closedloop.detectors.{detector.name}: its bundle reads frames at "
+            f"{detector.rate_hz:g} Hz, the closed loop's configs/scene/{scene_name}.yaml "
+            f"camera runs at {rate:g} Hz"
+        )
+
+
 def open_loop_force(trial: TacTipTrial, t: float) -> float:
     """Grip force the retraction alone would give at ``t`` (no response), N."""
     depth = float(trial.indentation(np.array([t]))[0])
@@ -283,6 +321,7 @@ def run_tactip_trial(
     lo, hi = (float(v) for v in plant_cfg["onset_s"])
     params, tr = draw_trial(model, rng, speed_mm_s=speed_mm_s, onset_s=(lo, hi))
     sensor = TacTipSensor(scene, tr, rng)
+    check_frame(detector, sensor, scene.name)
     actuator = Actuator(
         float(plant_cfg["latency_s"]), float(plant_cfg["tau_s"]), initial=-speed_mm_s
     )
