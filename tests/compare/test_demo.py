@@ -58,6 +58,7 @@ def test_demo_smoke_two_families(
         "svm_rbf": "svm_k2",
         "svm_rbf_tuned": "svm_k2",
         "svm_linear": "svm_linear_k2",
+        "alignment": "alignment_k1",
     }
     verdict = rows["tactip"][2].strip()
     assert f"tactip: {shown.get(verdict, 'svm_k1')}" == rows["tactip"][8].strip()
