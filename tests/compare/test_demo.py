@@ -172,3 +172,31 @@ def test_demo_quick_end_to_end(tmp_path: Path) -> None:
     ):
         assert f"compare/{family}/report.md" in text
     assert "compare/dos_real" not in text
+
+
+def test_a_failing_closed_loop_scenario_costs_its_columns_not_the_demo(
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """A scenario whose detector cannot be exported: the demo still writes its report, the row's
+    slip and drop are "-", the closed-loop cell says it failed and stderr names why."""
+    import slipkit.demo
+
+    def refuse(*args: object, **kwargs: object) -> None:
+        raise SlipkitError("parity check failed for fsr_robust: no bundle written")
+
+    monkeypatch.setattr(slipkit.demo, "_run_closedloop", refuse)
+    report = _run(
+        tmp_path,
+        ["~comparisons", "+comparisons={tactip: []}", "quick_seeds=[0]"],
+    )
+    row = report.read_text().splitlines()[4].split("|")
+    err = capsys.readouterr().err
+    assert ("tactip", "-", "-", "tactip (failed: see the demo's stderr)") == (
+        row[1].strip(),
+        row[5].strip(),
+        row[6].strip(),
+        row[8].strip(),
+    )
+    assert "closed loop tactip: skipped: parity check failed for fsr_robust" in err
