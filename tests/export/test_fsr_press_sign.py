@@ -395,3 +395,59 @@ def test_fsr_comparison_of_four_trials_exports_every_estimator(tmp_path: Path) -
     ].tolist()
     assert ["ok"] * 4 == df["export"].tolist()
     assert "falling" == read_run(out / "runs" / "fsr_paper").model.polarity_
+
+
+def _tied_slide() -> tuple[FSRTouchSlip, np.ndarray, np.ndarray]:
+    """A confirmed detector (2 peaks within 30 ms) and a pressed staircase on a binary
+    voltage grid (exact in float32) whose blocks 6 and 7 rise by the same step (a tie,
+    as an ADC gives), and the same staircase with block 7 raised 0.2 uV (float32
+    rounding of a sign-normalised sample)."""
+    inc = np.zeros(40)
+    inc[[6, 7]], inc[12] = 4.0, 8.0  # per block, in 2^-10 V steps: a tie, a larger peak
+    v = np.r_[np.full(10, 4.5), np.repeat(4.0 + np.cumsum(inc) * 2.0**-10, 5)]
+    rounded = v.copy()
+    rounded[10 + 7 * 5 : 10 + 8 * 5] += 2e-7
+    det = FSRTouchSlip(
+        threshold=1.0,
+        polarity="falling",
+        confirm_events=2,
+        confirm_window_s=0.03,
+        peak_gap_s=0.005,
+    ).fit(v[:, None], np.zeros(len(v), int))
+    return det, v[:, None], rounded[:, None]
+
+
+def test_confirmed_score_ignores_float32_rounding_at_a_derivative_tie() -> None:
+    """Two equal block derivatives stay a tie (the first is the peak) when rounding
+    moves one by 1e-4 V/s, so the peak does not move a block (closed-loop fsr_robust:
+    scores 0.195 apart, parity 98.9 %)."""
+    det, exact, rounded = _tied_slide()
+    expected = det.decision_function(exact)
+    assert bool(np.any(expected >= det.threshold_))  # the tie's peak is counted
+    np.testing.assert_array_equal(expected, det.decision_function(rounded))
+
+
+def test_confirmed_graph_reads_a_rounded_tie_as_the_detector() -> None:
+    """The graph's peak test treats near-equal derivatives as the detector does:
+    parity passes on the rounded staircase with scores equal to float32 precision."""
+    det, _, rounded = _tied_slide()
+    rep = check_detector_parity(det, export_fsr_touch_slip(det), rounded)
+    assert (True, 0) == (rep["passed"], rep["n_finite_mismatch"])
+    assert rep["max_abs_diff"] < 1e-3
+
+
+@pytest.mark.parametrize("on_score", [True, False])
+def test_alpha_on_a_training_score_moves_halfway_to_the_next_lower(
+    on_score: bool,
+) -> None:
+    """A threshold equal to a training score (a ROC choice) moves halfway down to the
+    next lower score, so repeated scores of a quantised signal never sit on it; any
+    other threshold is kept."""
+    det, exact, _ = _tied_slide()
+    scores = det.decision_function(exact)
+    finite = np.unique(scores[np.isfinite(scores)])
+    top, below = float(finite[-1]), float(finite[-2])
+    given = top if on_score else 0.5 * (top + below) + 0.01
+    det.set_params(threshold=given).fit(exact, np.zeros(len(exact), int))
+    expected = 0.5 * (top + below) if on_score else given
+    assert expected == det.threshold_

@@ -14,7 +14,9 @@ Three stages on the conditioned FSR voltage sampled at 2 kHz (paper Sec. 2.3, Fi
    ``input="force"`` (the force comes from the eq. 6 polynomial,
    :func:`slipkit.physics.fsr.force_from_voltage`), so the press of a touch is never slip.
 
-``alpha`` is :attr:`threshold_`, chosen on the ROC by ``fit`` (the paper: ROC over 30
+``alpha`` is :attr:`threshold_`, chosen on the ROC by ``fit`` (an alpha equal to a
+training score, as a ROC choice is, moves halfway down to the next lower training score,
+so that a repeated score of a quantised signal is never exactly on it) (the paper: ROC over 30
 induced slips, ``alpha = 8``; the text prints no unit, eq. 4 makes it V/s) or fixed.
 
 Block and sample timing (batch and streaming agree exactly). Blocks are aligned to the
@@ -56,7 +58,9 @@ sharp external bump (tens of % of the holding force in a millisecond) gives one 
 derivative, as large as a slip event's; a slide is a *train* of stick-slip events. With
 ``confirm_events = k >= 2`` a block's derivative counts as an *event* when it is a peak
 (larger than the ``peak_gap_s`` before it, at least as large as the ``peak_gap_s`` after
-it, so it is confirmed ``peak_gap_s`` later), and the score is the ``k``-th largest event
+it, so it is confirmed ``peak_gap_s`` later; derivatives within :data:`PEAK_TIE` x blocks
+per second of each other count as equal, so float32 rounding never moves a peak), and
+the score is the ``k``-th largest event
 within the last ``confirm_window_s``: ``score >= alpha`` means "at least ``k`` separate
 events of at least ``alpha`` within the window". ``k = 1`` (the default) is the paper's
 detector exactly. The ``fsr_robust`` config uses ``k = 3`` over 0.4 s.
@@ -92,6 +96,14 @@ class PolarityWarning(SlipkitWarning):
 #: ``delta`` when not given, per input: a 0.2 V drop is a ~0.1 N press with the default
 #: calibration (200x the 1 mV conditioning noise, below the FSR 402's 0.2 N threshold).
 DEFAULT_DELTA = {"voltage": 0.2, "force": 0.1}
+
+#: Block-mean step (V, or N for force input) below which two block derivatives count as
+#: equal in the peak test of ``confirm_events > 1``. A quantised signal (an ADC) gives
+#: exactly equal derivatives often; the deployed graph reads float32 samples (a 5 V
+#: sample is off by up to 0.3 uV), so an exact ``>`` would break such ties at random
+#: and move a peak to the next block. 10 uV is 30x that rounding and 1 % of the 1 mV
+#: conditioning noise; times the blocks per second it is the tolerance in V/s.
+PEAK_TIE = 1e-5
 
 
 def _sequential_sum(values: Sequence[float]) -> float:
@@ -244,6 +256,11 @@ class FSRTouchSlip(StreamDetector):
         return max(1, math.ceil(float(self.peak_gap_s) * self._per_s - 1e-9))
 
     @property
+    def _peak_tie(self) -> float:
+        # derivatives (V/s or N/s) closer than this are equal in the peak test
+        return PEAK_TIE * self._per_s
+
+    @property
     def _confirm_blocks(self) -> int:
         # blocks of the confirmation window (at least confirm_events)
         return max(
@@ -388,6 +405,17 @@ class FSRTouchSlip(StreamDetector):
     ) -> None:
         self.delta_ = self._delta
         super()._calibrate(X, y, scores, segments)
+        # A ROC (the sample ROC here, or the event ROC of slipkit train, which passes
+        # its choice as ``threshold``) puts alpha on a training score. Scores of a
+        # quantised signal (an ADC) repeat exactly across recordings, so held-out
+        # scores land on alpha itself and the decision hangs on the last bit, which
+        # the deployed float32 graph cannot reproduce: alpha on a training score moves
+        # halfway down to the next lower one (no training decision changes).
+        t = float(self.threshold_)
+        finite = scores[np.isfinite(scores)]
+        below = finite[finite < t]
+        if below.size and np.any(finite == t):
+            self.threshold_ = 0.5 * (t + float(below.max()))
 
     # -- batch ----------------------------------------------------------------------
     def _block_stats(self, v: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -449,7 +477,8 @@ class FSRTouchSlip(StreamDetector):
         left = sliding_window_view(pad, r)[: nb - r].max(axis=1)  # d[b-r .. b-1]
         right = sliding_window_view(d[1:], r).max(axis=1)  # d[b+1 .. b+r]
         mid = d[: nb - r]
-        peak = np.isfinite(mid) & (mid > left) & (mid >= right)
+        tie = self._peak_tie  # a near-equal neighbour is a tie: the graph's float32
+        peak = np.isfinite(mid) & (mid > left + tie) & (mid >= right - tie)
         pv = np.where(peak, mid, -np.inf)  # peak of block b, known at block b + r
         win = sliding_window_view(np.concatenate([np.full(wb - 1, -np.inf), pv]), wb)
         out[r:] = np.partition(win, wb - k, axis=1)[:, wb - k]
@@ -495,6 +524,7 @@ class FSRStream:
     def __init__(self, detector: FSRTouchSlip) -> None:
         self._need = int(detector.confirm_events)
         self._gap = detector._peak_gap
+        self._tie = detector._peak_tie
         self._wb = detector._confirm_blocks
         self._force = detector.input == "force"
         self._coeffs = detector._coeffs() if self._force else None
@@ -564,7 +594,11 @@ class FSRStream:
         if c >= r:  # the block r back is now a peak or not
             vals = list(self._recent)
             mid = vals[r]
-            if math.isfinite(mid) and mid > max(vals[:r]) and mid >= max(vals[r + 1 :]):
+            if (
+                math.isfinite(mid)
+                and mid > max(vals[:r]) + self._tie
+                and mid >= max(vals[r + 1 :]) - self._tie
+            ):
                 self._peaks.append((c - r, mid))
         while self._peaks and self._peaks[0][0] <= c - r - self._wb:
             self._peaks.popleft()
@@ -575,6 +609,7 @@ class FSRStream:
 
 __all__ = [
     "DEFAULT_DELTA",
+    "PEAK_TIE",
     "PRESS_DIRECTION",
     "FSRStream",
     "FSRTouchSlip",

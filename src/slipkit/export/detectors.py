@@ -534,10 +534,13 @@ def _fsr_confirmed(
     mid = cols(d, gap, gap + wb)
     left = cols(run_max, 0, wb)
     right = cols(run_max, gap + 1, gap + 1 + wb)
+    # near-equal neighbours are ties (FSRTouchSlip._peak_tie), so float32 input
+    # rounding never moves a peak; _NO_BLOCK +- tie is still _NO_BLOCK
+    tie = float(detector._peak_tie)
     peak = g.op(
         "And",
-        g.op("Greater", mid, left),
-        g.op("GreaterOrEqual", mid, right),
+        g.op("Greater", mid, g.op("Add", left, g.const(tie, np.float64))),
+        g.op("GreaterOrEqual", mid, g.op("Sub", right, g.const(tie, np.float64))),
         stem="peak",
     )
     pv = g.op("Where", peak, mid, g.const(_NO_BLOCK, np.float64), stem="peak_score")
