@@ -36,14 +36,14 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
 from slipkit.closedloop.detectors import Detector
 from slipkit.closedloop.fsr import _draw, _span
 from slipkit.closedloop.pinch import PinchTrial, load_profile, run_pinch_trial
 from slipkit.closedloop.plant import G_M_S2, Actuator, PinchPlant, PlantState
 from slipkit.closedloop.run import Outcome, speed_grid
-from slipkit.closedloop.scenarios import register_scenario
+from slipkit.closedloop.scenarios import plant_params, register_scenario
 from slipkit.errors import SlipkitError
 from slipkit.physics.biotac import surface_point, tangent_frame
 from slipkit.sim.core import EFFECTS, Scene, SceneState, draw_effect_params, effect_name
@@ -291,12 +291,7 @@ class BioTacScenario:
 
     def check(self, scen: DictConfig, scene: Scene) -> None:
         """Refuse bad plant parameters and a scene that is not the BioTac lift-and-slip."""
-        plain = OmegaConf.to_container(scen.plant, resolve=True)
-        if not isinstance(plain, dict):
-            raise SlipkitError(
-                "closedloop.plant: expected a mapping of plant parameters"
-            )
-        check_plant({str(k): v for k, v in plain.items()})
+        check_plant(plant_params(scen))
         if not isinstance(scene.model, BioTacLiftSlip):
             raise SlipkitError(
                 f"closedloop.scene: the BioTac closed loop needs a BioTac lift-and-slip "

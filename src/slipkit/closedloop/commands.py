@@ -41,7 +41,11 @@ from slipkit.closedloop.detectors import (
 )
 from slipkit.closedloop.report import markdown_table, summarize, write_report
 from slipkit.closedloop.run import run_detector
-from slipkit.closedloop.scenarios import ClosedLoopScenario, get_scenario
+from slipkit.closedloop.scenarios import (
+    ClosedLoopScenario,
+    get_scenario,
+    plant_params,
+)
 from slipkit.errors import SlipkitError
 from slipkit.train.runs import new_run_dir
 
@@ -276,10 +280,7 @@ def run_scenario(
         check_value(f"seeds[{i}]", s, SEED)
     if not seeds:
         raise SlipkitError("seeds=[]: list at least one seed")
-    plain = OmegaConf.to_container(scen.plant, resolve=True)
-    if not isinstance(plain, dict):
-        raise SlipkitError("closedloop.plant: expected a mapping of plant parameters")
-    plant = {str(k): v for k, v in plain.items()}
+    plant = plant_params(scen)
     scenario = scenario_of(scen)
     scene_cfg = _compose(
         "train",

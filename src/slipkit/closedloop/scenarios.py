@@ -96,6 +96,16 @@ _T = TypeVar("_T")
 SCENARIOS: dict[str, type] = {}
 
 
+def plant_params(scen: DictConfig) -> dict[str, Any]:
+    """The scenario's ``plant:`` mapping as a plain dict (one error when it is not a mapping)."""
+    from omegaconf import OmegaConf
+
+    plain = OmegaConf.to_container(scen.plant, resolve=True)
+    if not isinstance(plain, dict):
+        raise SlipkitError("closedloop.plant: expected a mapping of plant parameters")
+    return {str(k): v for k, v in plain.items()}
+
+
 def register_scenario(name: str) -> Callable[[type[_T]], type[_T]]:
     """Class decorator: register a :class:`ClosedLoopScenario` under ``name``."""
 

@@ -44,12 +44,12 @@ from functools import partial
 from typing import Any
 
 import numpy as np
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
 from slipkit.closedloop.detectors import Detector
 from slipkit.closedloop.plant import PlantState
 from slipkit.closedloop.run import Outcome, speed_grid
-from slipkit.closedloop.scenarios import register_scenario
+from slipkit.closedloop.scenarios import plant_params, register_scenario
 from slipkit.errors import SlipkitError
 from slipkit.physics.stick_slip import G_M_S2, natural_frequency
 from slipkit.sim.core import EFFECTS, Scene, SceneState, draw_effect_params, effect_name
@@ -668,13 +668,6 @@ def run_sliptack_trial(
     )
 
 
-def _plant_dict(scen: DictConfig) -> dict[str, Any]:
-    plain = OmegaConf.to_container(scen.plant, resolve=True)
-    if not isinstance(plain, dict):
-        raise SlipkitError("closedloop.plant: expected a mapping of plant parameters")
-    return {str(k): v for k, v in plain.items()}
-
-
 @register_scenario("sliptack")
 class SlipTackScenario:
     """SlipTack pull (speeds from ``pull_speeds``) and drop (condition 0), regrasp on slip."""
@@ -690,7 +683,7 @@ class SlipTackScenario:
 
         from slipkit.sim.commands import build_scene
 
-        check_plant(_plant_dict(scen))
+        check_plant(plant_params(scen))
         if not isinstance(scene.model, SlipTackDrop):
             raise SlipkitError(
                 f"closedloop.scene: the SlipTack closed loop needs a SlipTack drop scene; "

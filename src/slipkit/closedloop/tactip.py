@@ -23,12 +23,12 @@ from functools import cached_property, partial
 from typing import Any
 
 import numpy as np
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
 from slipkit.closedloop.detectors import Detector
 from slipkit.closedloop.plant import Actuator, GraspPlant, PlantState
 from slipkit.closedloop.run import Outcome, speed_grid
-from slipkit.closedloop.scenarios import register_scenario
+from slipkit.closedloop.scenarios import plant_params, register_scenario
 from slipkit.errors import SlipkitError
 from slipkit.physics.tactip import normal_force_N
 from slipkit.sim.core import (
@@ -405,12 +405,7 @@ class TacTipScenario:
 
     def check(self, scen: DictConfig, scene: Scene) -> None:
         """Refuse plant parameters that cannot run and a scene that is not the gravity drop."""
-        plain = OmegaConf.to_container(scen.plant, resolve=True)
-        if not isinstance(plain, dict):
-            raise SlipkitError(
-                "closedloop.plant: expected a mapping of plant parameters"
-            )
-        check_scenario({str(k): v for k, v in plain.items()})
+        check_scenario(plant_params(scen))
         if not isinstance(scene.model, TacTipGravityDrop):
             raise SlipkitError(
                 f"closedloop.scene: the TacTip closed loop needs a TacTip gravity-drop "
