@@ -1094,6 +1094,58 @@ def davis_event_frames(
     return frames, times
 
 
+def _davis_held_out(
+    task: Any,
+    run: Run,
+    dataset: Dataset,
+    frame_s: float,
+    h: int,
+    w: int,
+    check: Callable[[Any, NDArray[np.float64], NDArray[Any]], None],
+) -> list[HeldOutTrial]:
+    """The run's held-out DAVIS trials as runtime event frames, each checked by ``check``.
+
+    ``check(trial, events, frames)`` raises when the runtime's view of a trial's frames
+    differs from the training side's (the deployer's parity before anything is written).
+    """
+    split = run_metrics(run).get("split", {})
+    if split.get("test"):
+        test_ids = {str(t) for t in split["test"]}
+    else:  # the task's own split, the run's seed
+        from slipkit.data.splits import split_by_trial
+
+        seed = int(run.config.get("seed", 0))
+        test_ids = {
+            str(t)
+            for t in split_by_trial(dataset, test_size=task.test_size, seed=seed).test
+        }
+    trials = []
+    for trial in dataset.subset([t for t in dataset.trial_ids if str(t) in test_ids]):
+        table = trial.streams[task.stream].sort_values("t", kind="stable")
+        ev = table[["t", "x", "y", "polarity"]].to_numpy(np.float64)
+        frames, times = davis_event_frames(ev, frame_s=frame_s, height_px=h, width_px=w)
+        if not len(frames):
+            continue
+        check(trial, ev, frames)
+        label = str(int(np.isfinite(float(trial.labels.get(task.label, np.inf)))))
+        group = trial.meta.get(task.group)
+        trials.append(
+            HeldOutTrial(
+                str(trial.trial_id),
+                frames,
+                times,
+                label=label,
+                group=None if group is None else str(group),
+            )
+        )
+    if not trials:
+        raise SlipkitError(
+            f"none of the held-out trials of run {run.path} has events in the rebuilt "
+            f"dataset {dataset.name!r}"
+        )
+    return trials
+
+
 def _deploy_davis(
     task: Task, run: Run, dataset: Dataset, options: Mapping[str, Any]
 ) -> Deployment:
@@ -1125,17 +1177,6 @@ def _deploy_davis(
             f"the run's model is {type(det).__name__}"
         )
     frame_s, h, w = float(det.frame_s), int(det.height_px), int(det.width_px)
-    split = run_metrics(run).get("split", {})
-    if split.get("test"):
-        test_ids = {str(t) for t in split["test"]}
-    else:  # the task's own split, the run's seed
-        from slipkit.data.splits import split_by_trial
-
-        seed = int(run.config.get("seed", 0))
-        test_ids = {
-            str(t)
-            for t in split_by_trial(dataset, test_size=task.test_size, seed=seed).test
-        }
     step = {
         "op": "davis_areas",
         "opening_px": int(det.opening_px),
@@ -1144,13 +1185,8 @@ def _deploy_davis(
         "min_area_px": int(det.min_area_px),
     }
     pipeline = Pipeline([step], (1, 2, h, w), "manifest.json")
-    trials = []
-    for trial in dataset.subset([t for t in dataset.trial_ids if str(t) in test_ids]):
-        table = trial.streams[task.stream].sort_values("t", kind="stable")
-        ev = table[["t", "x", "y", "polarity"]].to_numpy(np.float64)
-        frames, times = davis_event_frames(ev, frame_s=frame_s, height_px=h, width_px=w)
-        if not len(frames):
-            continue
+
+    def check(trial: Any, ev: NDArray[np.float64], frames: NDArray[Any]) -> None:
         # Parity of the op with the training-side detector, frame by frame.
         want = det.frames(ev)[["pos_area_px", "neg_area_px"]].to_numpy(np.float64)
         got = np.stack([pipeline(f[None])[0].copy() for f in frames])
@@ -1162,22 +1198,8 @@ def _deploy_davis(
                 f"areas {got[k].tolist()} px but the detector {want[k].tolist()} px "
                 f"({len(bad)} of {len(frames)} frames differ); no bundle written"
             )
-        label = str(int(np.isfinite(float(trial.labels.get(task.label, np.inf)))))
-        group = trial.meta.get(task.group)
-        trials.append(
-            HeldOutTrial(
-                str(trial.trial_id),
-                frames,
-                times,
-                label=label,
-                group=None if group is None else str(group),
-            )
-        )
-    if not trials:
-        raise SlipkitError(
-            f"none of the held-out trials of run {run.path} has events in the rebuilt "
-            f"dataset {dataset.name!r}"
-        )
+
+    trials = _davis_held_out(task, run, dataset, frame_s, h, w, check)
     channels = [
         f"{p}_{r}_{c}" for p in ("pos", "neg") for r in range(h) for c in range(w)
     ]
@@ -1230,24 +1252,8 @@ def _deploy_davis_events(
     clf = run.model
     scores = EventFrameScores(classifier=clf).fit()
     frame_s, h, w = float(clf.frame_s), int(clf.height_px), int(clf.width_px)
-    split = run_metrics(run).get("split", {})
-    if split.get("test"):
-        test_ids = {str(t) for t in split["test"]}
-    else:  # the task's own split, the run's seed
-        from slipkit.data.splits import split_by_trial
 
-        seed = int(run.config.get("seed", 0))
-        test_ids = {
-            str(t)
-            for t in split_by_trial(dataset, test_size=task.test_size, seed=seed).test
-        }
-    trials = []
-    for trial in dataset.subset([t for t in dataset.trial_ids if str(t) in test_ids]):
-        table = trial.streams[task.stream].sort_values("t", kind="stable")
-        ev = table[["t", "x", "y", "polarity"]].to_numpy(np.float64)
-        frames, times = davis_event_frames(ev, frame_s=frame_s, height_px=h, width_px=w)
-        if not len(frames):
-            continue
+    def check(trial: Any, ev: NDArray[np.float64], frames: NDArray[Any]) -> None:
         # The runtime frames' features against the training-side classifier's, per frame.
         _, want = clf.frame_features(ev)
         got = scores.features(frames)
@@ -1259,22 +1265,8 @@ def _deploy_davis_events(
                 f"from EventFrameClassifier.frame_features ({len(bad)} of {len(frames)} "
                 "frames); no bundle written"
             )
-        label = str(int(np.isfinite(float(trial.labels.get(task.label, np.inf)))))
-        group = trial.meta.get(task.group)
-        trials.append(
-            HeldOutTrial(
-                str(trial.trial_id),
-                frames,
-                times,
-                label=label,
-                group=None if group is None else str(group),
-            )
-        )
-    if not trials:
-        raise SlipkitError(
-            f"none of the held-out trials of run {run.path} has events in the rebuilt "
-            f"dataset {dataset.name!r}"
-        )
+
+    trials = _davis_held_out(task, run, dataset, frame_s, h, w, check)
     channels = [
         f"{p}_{r}_{c}" for p in ("pos", "neg") for r in range(h) for c in range(w)
     ]
