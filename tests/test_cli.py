@@ -115,3 +115,14 @@ def test_out_of_range_scene_parameter_is_a_clear_error(
     assert "rate_hz" in err
     assert "Traceback" not in err
     assert not (tmp_path / "x").exists()
+
+
+def test_multirun_with_cfg_is_a_one_line_usage_error(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """`-m` with `--cfg` (Hydra allows one mode) exits 2 naming both flags, not an internal error."""
+    with pytest.raises(SystemExit) as exc:
+        main(["train", "-m", "experiment=fsr_roc", "--cfg", "hydra"])
+    err = capsys.readouterr().err.strip()
+    assert (2, 1) == (exc.value.code, len(err.splitlines()))
+    assert "--multirun and --cfg cannot be combined" in err

@@ -199,11 +199,31 @@ def _check_flags(sub: str, rest: Sequence[str]) -> None:
     try:
         # --version prints and exits here; Hydra prints it again on its own parse.
         with contextlib.redirect_stdout(io.StringIO()):
-            parser.parse_args(list(rest))
+            args = parser.parse_args(list(rest))
     except _ArgumentError as exc:
         _fail(sub, f"error: {exc} (slipkit {sub} --help lists the options)", 2)
     except SystemExit:
-        pass
+        return
+    # Hydra raises a bare ValueError for these (reported as an internal error
+    # otherwise); the same rule as hydra._internal.utils._run_hydra, in one line.
+    modes = [
+        flag
+        for flag, on in (
+            ("--multirun", args.multirun),
+            ("--cfg", args.cfg is not None),
+            ("--run", args.run),
+            ("--info", args.info is not None),
+            ("--shell-completion", args.shell_completion),
+        )
+        if on
+    ]
+    if len(modes) > 1:
+        _fail(
+            sub,
+            f"error: {' and '.join(modes)} cannot be combined: give one of --run, "
+            "--multirun, --cfg, --info, --shell-completion",
+            2,
+        )
 
 
 @contextlib.contextmanager
