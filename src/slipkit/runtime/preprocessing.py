@@ -79,7 +79,18 @@ Array = NDArray[np.float64]
 
 
 class Op(Protocol):
-    """A compiled preprocessing step: a fixed input shape, a fixed output shape."""
+    """A compiled preprocessing step: a fixed input shape, a fixed output shape.
+
+    An op may also set ``keeps_nonfinite`` (a bool, or a property for a stateful
+    op): True when the output has the input's shape, each output value is its
+    input value through arithmetic that keeps a NaN or infinity non-finite (minus
+    or divided by a number > 0), so a NaN or infinity anywhere in the input comes
+    out as a NaN or infinity, and the op holds no state a bad frame could reach
+    right now.
+    :class:`~slipkit.runtime.loop.StreamLoop` then tests the graph input alone for
+    one-frame windows (the frame is tested only when that finds a NaN or
+    infinity). Ops without it are never run on a frame before it is tested.
+    """
 
     out_shape: tuple[int, ...]
 
@@ -129,6 +140,9 @@ def _broadcast_param(f: Fields, key: str, in_shape: tuple[int, ...]) -> Array:
 
 
 class _Standardize:
+    #: (x - mean) / scale with finite mean and scale > 0 (see :class:`Op`)
+    keeps_nonfinite = True
+
     def __init__(self, mean: Array, scale: Array, in_shape: tuple[int, ...]) -> None:
         # Broadcast once, here: a ufunc on same-shape operands costs ~0.2 us on a
         # small window, one that broadcasts ~0.7 us (measured; per frame, it adds up).
@@ -260,6 +274,9 @@ def _pin_velocity_features(f: Fields, in_shape: tuple[int, ...]) -> Op:
 
 
 class _Subtract:
+    #: x - value with a finite value (see :class:`Op`)
+    keeps_nonfinite = True
+
     def __init__(self, value: Array, in_shape: tuple[int, ...]) -> None:
         # Broadcast once (see _Standardize).
         self.value = np.ascontiguousarray(np.broadcast_to(value, in_shape))
@@ -320,6 +337,15 @@ class _BaselineFirst:
         # shapes skips numpy's broadcasting setup (~0.4 us per call on a 1 x 19 BioTac
         # window, a tenth of a force model's whole loop step).
         self._base = np.zeros(self.out_shape)
+
+    @property
+    def keeps_nonfinite(self) -> bool:
+        """True once the baseline is complete (see :class:`Op`).
+
+        From then on the op is ``x - base`` with a fixed base; before, each call adds frames to the baseline, so
+        a frame must be tested before it reaches the op.
+        """
+        return self._count >= self.n
 
     def __call__(self, x: Array) -> Array:
         if self._count < self.n:
