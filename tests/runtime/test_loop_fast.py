@@ -22,16 +22,30 @@ def _bundle(
     window: int = 1,
     preprocessing: list[dict[str, Any]] | None = None,
     streams: list[str] | None = None,
+    argmax: bool = False,
 ) -> Path:
     pre = BASELINE if preprocessing is None else preprocessing
     n_in = window * N_CH
     if pre and pre[-1]["op"] == "select":
         n_in = window * len(pre[-1]["indices"])
-    man = manifest(n_in, threshold=0.0, window=window, k=2, preprocessing=pre)
+    rng = np.random.default_rng(1)
+    if argmax:
+        decision = {
+            "output": "score",
+            "rule": "argmax",
+            "classes": ["static", "slip", "roll"],
+            "slip_classes": ["slip", "roll"],
+            "positive": "slip",
+        }
+        man = manifest(n_in, threshold=None, window=window, k=2, decision=decision)
+        man["preprocessing"] = pre
+        graph = linear_graph(rng.normal(size=(n_in, 3)), [0.0, 0.1, -0.1])
+    else:
+        man = manifest(n_in, threshold=0.0, window=window, k=2, preprocessing=pre)
+        graph = linear_graph(rng.normal(size=n_in), 0.05)
     if streams is not None:
         man["frame"]["streams"] = streams
-    rng = np.random.default_rng(1)
-    return write_bundle(root / "b", linear_graph(rng.normal(size=n_in), 0.05), man)
+    return write_bundle(root / "b", graph, man)
 
 
 def _faulty_stream() -> tuple[list[Any], list[Any], dict[str, int]]:
@@ -90,13 +104,15 @@ def _comparable(result: LoopResult) -> tuple[Any, ...]:
 
 
 @pytest.mark.filterwarnings("ignore:overflow encountered in cast")
-@pytest.mark.parametrize("skip_gaps", [False, True])
+@pytest.mark.parametrize(
+    ("skip_gaps", "argmax"), [(False, False), (True, False), (False, True)]
+)
 def test_fast_path_equals_step_on_a_faulty_stream(
-    tmp_path: Path, skip_gaps: bool
+    tmp_path: Path, skip_gaps: bool, argmax: bool
 ) -> None:
     """On a stream with every fault, the fast path's records and flags equal step's, before and after reset."""
     values, times, expected_bad = _faulty_stream()
-    path = _bundle(tmp_path)
+    path = _bundle(tmp_path, argmax=argmax)
     # A bundle each: a loaded bundle's ops (the baseline) hold one stream's state.
     fast = StreamLoop(load_bundle(path), skip_gaps=skip_gaps)
     general = StreamLoop(load_bundle(path), skip_gaps=skip_gaps)

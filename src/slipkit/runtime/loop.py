@@ -571,29 +571,36 @@ class StreamLoop:
             cls = int(above) if self._has_classes else -1
         run = self._run = self._run + 1 if slip else 0
         declared = run >= self._k
-        t1 = time.perf_counter_ns()
+        self._record(
+            seen, timestamp, s, slip, cls, declared, time.perf_counter_ns() - t0
+        )
+        return declared
+
+    def _record(
+        self,
+        seen: int,
+        timestamp: float | None,
+        s: float,
+        slip: bool,
+        cls: int,
+        declared: bool,
+        latency_ns: int,
+    ) -> None:
+        """Store one decision (after the latency clock stopped) and call ``on_decision``."""
         i = self._n
         if i == len(self._lat):
             self._grow()
+        ts = math.nan if timestamp is None else timestamp
         self._frame[i] = seen - 1
-        self._ts[i] = math.nan if timestamp is None else timestamp
+        self._ts[i] = ts
         self._score[i] = s
         self._slip[i] = slip
         self._klass[i] = cls
         self._decl[i] = declared
-        self._lat[i] = t1 - t0
+        self._lat[i] = latency_ns
         self._n = i + 1
         if self.on_decision is not None:
-            self.on_decision(
-                seen - 1,
-                math.nan if timestamp is None else timestamp,
-                s,
-                cls,
-                slip,
-                declared,
-                t1 - t0,
-            )
-        return declared
+            self.on_decision(seen - 1, ts, s, cls, slip, declared, latency_ns)
 
     def _step_one(
         self,
@@ -643,7 +650,29 @@ class StreamLoop:
         if self._input_finite.tobytes() != self._input_ok:
             self._nonfinite_one(seen)
             return None
-        return self._decide(seen, timestamp, t0)
+        if self._argmax:
+            return self._decide(seen, timestamp, t0)
+        # _decide's threshold rule, inline (one call fewer on the force models).
+        self._session.run_with_iobinding(self._binding)
+        s = self._out.item(self._col)
+        if not math.isfinite(s):
+            self._skip_nonfinite()
+            return None
+        above = s > self._thr if self._strict else s >= self._thr
+        slip = above == self._slip_above
+        run = self._run = self._run + 1 if slip else 0
+        declared = run >= self._k
+        t1 = time.perf_counter_ns()
+        self._record(
+            seen,
+            timestamp,
+            s,
+            slip,
+            int(above) if self._has_classes else -1,
+            declared,
+            t1 - t0,
+        )
+        return declared
 
     def _fold_ready(self) -> bool:
         """Whether every op keeps non-finite values now (remembered once true, until reset)."""
