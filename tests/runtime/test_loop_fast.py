@@ -1,4 +1,4 @@
-"""StreamLoop's one-frame fast path (_step_one) gives step's results, bad frames included."""
+"""StreamLoop's hop-1 fast path (_step_hop1) gives step's results, bad frames included."""
 
 from __future__ import annotations
 
@@ -20,6 +20,7 @@ def _bundle(
     root: Path,
     *,
     window: int = 1,
+    hop: int = 1,
     preprocessing: list[dict[str, Any]] | None = None,
     streams: list[str] | None = None,
     argmax: bool = False,
@@ -37,11 +38,15 @@ def _bundle(
             "slip_classes": ["slip", "roll"],
             "positive": "slip",
         }
-        man = manifest(n_in, threshold=None, window=window, k=2, decision=decision)
+        man = manifest(
+            n_in, threshold=None, window=window, hop=hop, k=2, decision=decision
+        )
         man["preprocessing"] = pre
         graph = linear_graph(rng.normal(size=(n_in, 3)), [0.0, 0.1, -0.1])
     else:
-        man = manifest(n_in, threshold=0.0, window=window, k=2, preprocessing=pre)
+        man = manifest(
+            n_in, threshold=0.0, window=window, hop=hop, k=2, preprocessing=pre
+        )
         graph = linear_graph(rng.normal(size=n_in), 0.05)
     if streams is not None:
         man["frame"]["streams"] = streams
@@ -105,14 +110,21 @@ def _comparable(result: LoopResult) -> tuple[Any, ...]:
 
 @pytest.mark.filterwarnings("ignore:overflow encountered in cast")
 @pytest.mark.parametrize(
-    ("skip_gaps", "argmax"), [(False, False), (True, False), (False, True)]
+    ("window", "skip_gaps", "argmax"),
+    [
+        (1, False, False),
+        (1, True, False),
+        (1, False, True),
+        (4, False, False),
+        (4, True, False),
+    ],
 )
 def test_fast_path_equals_step_on_a_faulty_stream(
-    tmp_path: Path, skip_gaps: bool, argmax: bool
+    tmp_path: Path, window: int, skip_gaps: bool, argmax: bool
 ) -> None:
     """On a stream with every fault, the fast path's records and flags equal step's, before and after reset."""
     values, times, expected_bad = _faulty_stream()
-    path = _bundle(tmp_path, argmax=argmax)
+    path = _bundle(tmp_path, window=window, argmax=argmax)
     # A bundle each: a loaded bundle's ops (the baseline) hold one stream's state.
     fast = StreamLoop(load_bundle(path), skip_gaps=skip_gaps)
     general = StreamLoop(load_bundle(path), skip_gaps=skip_gaps)
@@ -125,7 +137,7 @@ def test_fast_path_equals_step_on_a_faulty_stream(
 
     general_result, general_flags = _run(general, step, values, times)
     assert (
-        StreamLoop._step_one,
+        StreamLoop._step_hop1,
         _comparable(general_result),
         general_flags,
         _comparable(general_result),
@@ -135,7 +147,8 @@ def test_fast_path_equals_step_on_a_faulty_stream(
         fast_flags,
         _comparable(again),
     )
-    assert (expected_bad, 1) == (
+    # the frame that overflows float32 is in `window` windows
+    assert (expected_bad, window) == (
         fast_result.bad_counts(),
         fast_result.nonfinite_windows,
     )
@@ -159,34 +172,43 @@ def test_bad_frames_never_reach_the_baseline(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(
-    ("window", "preprocessing", "streams", "io_binding", "expected"),
+    ("window", "hop", "preprocessing", "streams", "io_binding", "expected"),
     [
-        (1, None, None, True, True),
-        (1, [], None, True, True),
+        (1, 1, None, None, True, True),
+        (1, 1, [], None, True, True),
         (
+            1,
             1,
             [{"op": "standardize", "mean": [0.0] * N_CH, "scale": [2.0] * N_CH}],
             None,
             True,
             True,
         ),
-        (2, None, None, True, False),  # two-frame windows
-        (1, None, None, False, False),  # session.run, no binding
-        (1, None, ["pins"], True, False),  # NaN means missing
-        (1, [{"op": "select", "indices": [0, 2]}], None, True, False),  # drops values
+        (2, 1, None, None, True, True),
+        (2, 2, None, None, True, False),  # frames between hops are never in an input
+        (1, 1, None, None, False, False),  # session.run, no binding
+        (1, 1, None, ["pins"], True, False),  # NaN means missing
+        (1, 1, [{"op": "select", "indices": [0, 2]}], None, True, False),  # drops
     ],
 )
 def test_fast_path_only_where_the_input_test_stands_for_the_frame(
     tmp_path: Path,
     window: int,
+    hop: int,
     preprocessing: list[dict[str, Any]] | None,
     streams: list[str] | None,
     io_binding: bool,
     expected: bool,
 ) -> None:
-    """The fast path is chosen for one-frame windows, hop 1, a binding and value-keeping ops only."""
+    """The fast path is chosen for hop 1, a binding, values that are never missing and value-keeping ops only."""
     bundle = load_bundle(
-        _bundle(tmp_path, window=window, preprocessing=preprocessing, streams=streams)
+        _bundle(
+            tmp_path,
+            window=window,
+            hop=hop,
+            preprocessing=preprocessing,
+            streams=streams,
+        )
     )
     loop = StreamLoop(bundle, io_binding=io_binding)
-    assert expected == (getattr(loop.step, "__func__", None) is StreamLoop._step_one)
+    assert expected == (getattr(loop.step, "__func__", None) is StreamLoop._step_hop1)

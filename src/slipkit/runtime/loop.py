@@ -80,7 +80,7 @@ from slipkit.runtime.errors import BundleError
 from slipkit.runtime.session import ORT_ERRORS
 from slipkit.runtime.sources import Frame
 
-# Module-level names for _step_one: a global load instead of a global and an
+# Module-level names for _step_hop1: a global load instead of a global and an
 # attribute load, twice per frame.
 _clock = time.perf_counter_ns
 _ndarray = np.ndarray
@@ -384,23 +384,23 @@ class StreamLoop:
                 break
         self._capacity = capacity
         self.reset()
-        # One-frame windows with hop 1 (the BioTac force models) take _step_one,
-        # a hand-written copy of step's good-frame path: its fixed work (~3 us) is
-        # as long as a one-node graph's call, so the issue-16 target (loop <= 2x
-        # the bare call) needs the attribute loads, branches and the frame's own
-        # finiteness test it leaves out (docs/deploy.md, "Fewer nodes, less loop
-        # work"). Only when every op keeps a NaN or infinity non-finite (Op's
-        # keeps_nonfinite) does testing the graph input alone catch a bad frame.
         self._row0 = self._rows[0]
         self._window0 = self._windows[0]
+        # Hop 1 (the BioTac force models: one-frame windows) takes _step_hop1, a
+        # hand-written copy of step's good-frame path: step's fixed work (~3 us)
+        # is as long as a one-node graph's call, so the issue-16 target (loop <=
+        # 2x the bare call) needs the branches and the frame's own finiteness test
+        # it leaves out (docs/deploy.md, "Fewer nodes, less loop work"). Only when
+        # every op keeps a NaN or infinity non-finite (Op's keeps_nonfinite) and
+        # every frame completes a window (hop 1) does testing the graph input
+        # alone catch a bad frame.
         if (
-            self._w == 1
-            and self._hop == 1
+            self._hop == 1
             and not self.nan_is_missing
             and self._binding is not None
             and all(hasattr(op, "keeps_nonfinite") for op in self._ops)
         ):
-            self.step = self._step_one  # type: ignore[method-assign]
+            self.step = self._step_hop1  # type: ignore[method-assign]
 
     def reset(self) -> None:
         """Forget the window, the debounce state, the records and any op state (e.g. a baseline)."""
@@ -412,7 +412,7 @@ class StreamLoop:
         self._run = 0
         self._n = 0
         self._prev_ts = math.nan
-        # _step_one's ops all keep non-finite values (re-tested until a stateful
+        # _step_hop1's ops all keep non-finite values (re-tested until a stateful
         # op such as baseline_first is complete).
         self._folded = False
         # Windows completed by frames before this (1-based) count hold a flagged
@@ -607,23 +607,25 @@ class StreamLoop:
         if self.on_decision is not None:
             self.on_decision(seen - 1, ts, s, cls, slip, declared, latency_ns)
 
-    def _step_one(
+    def _step_hop1(
         self,
         values: ArrayLike,
         timestamp: float | None = None,
         arrival_ns: int | None = None,
     ) -> bool | None:
-        """:meth:`step` for one-frame windows with hop 1, once the ops keep non-finite values.
+        """:meth:`step` for hop 1, once the ops keep non-finite values.
 
         Chosen at construction (see ``__init__``); a good frame with an in-step
-        timestamp goes from the ring row through the ops into the graph input,
-        whose finiteness test stands for the frame's: the ops keep a NaN or
-        infinity non-finite, and so does the float32 cast. Only when the input is
-        not finite is the frame tested, to tell a bad frame (flagged) from a
-        float32 overflow (a skipped window). Anything else (not an ndarray of the
-        frame's shape and a real dtype, no timestamp, the first, a faulty or a gap
-        timestamp, a stateful op not yet complete) takes :meth:`step` unchanged,
-        so the results are :meth:`step`'s.
+        timestamp that completes a clean window goes into the ring and, with the
+        window, through the ops into the graph input, whose finiteness test
+        stands for the frame's: the window's older frames were tested before, the
+        ops keep a NaN or infinity non-finite, and so does the float32 cast. Only
+        when the input is not finite is the frame tested, to tell a bad frame
+        (flagged) from a float32 overflow (a skipped window). Anything else (not
+        an ndarray of the frame's shape and a real dtype, no timestamp, the
+        first, a faulty or a gap timestamp, a window still filling or to be
+        skipped, a stateful op not yet complete) takes :meth:`step` unchanged, so
+        the results are :meth:`step`'s.
         """
         t0 = _clock() if arrival_ns is None else arrival_ns
         if (
@@ -641,19 +643,36 @@ class StreamLoop:
             in_step = False
         if not in_step:
             return StreamLoop.step(self, values, timestamp, t0)
+        seen = self.n_frames + 1
+        w = self._w
+        # Window still filling, or one that holds a flagged frame or spans a gap
+        # (skip_gaps): no graph input to test, so step tests the frame. (Neither
+        # happens with one-frame windows: a flagged frame or a gap skips only its
+        # own window, and this frame's timestamp is in step.)
+        if w > 1 and (seen < w or seen < self._clean_from):
+            return StreamLoop.step(self, values, timestamp, t0)
         self._prev_ts = timestamp
-        seen = self.n_frames = self.n_frames + 1
+        self.n_frames = seen
         self.last_bad = None
-        # No skipped-window test: with one-frame windows a flagged frame or a gap
-        # (skip_gaps) only ever skips its own window, never a later one.
-        self._row0[...] = values
-        x = self._window0
+        if w == 1:
+            row = self._row0
+            x = self._window0
+        else:
+            p = self._pos
+            row = self._rows[p]
+            self._rows[p + w][...] = values
+            p += 1
+            if p == w:
+                p = 0
+            self._pos = p
+            x = self._windows[p]
+        row[...] = values
         for op in self._ops:
             x = op(x)
         self._input_view[...] = x
         np.isfinite(self._input_flat, out=self._input_finite)
         if self._input_finite.tobytes() != self._input_ok:
-            self._nonfinite_one(seen)
+            self._nonfinite_hop1(seen, row)
             return None
         if self._argmax:
             return self._decide(seen, timestamp, t0)
@@ -684,11 +703,16 @@ class StreamLoop:
         self._folded = all(op.keeps_nonfinite for op in self._ops)  # type: ignore[attr-defined]
         return self._folded
 
-    def _nonfinite_one(self, seen: int) -> None:
-        """:meth:`_step_one`'s input is not finite: flag a bad frame, else skip the overflow."""
-        np.isfinite(self._row0, out=self._finite)
+    def _nonfinite_hop1(self, seen: int, row: NDArray[np.float64]) -> None:
+        """:meth:`_step_hop1`'s input is not finite: flag a bad frame, else skip the window.
+
+        ``row`` is the new frame's ring row. The window's older frames were all
+        tested good (a window holding a flagged one is never computed), so the new
+        frame is bad, or the input overflowed float32.
+        """
+        np.isfinite(row, out=self._finite)
         if self._finite.tobytes() != self._frame_ok:
-            # What step does with a bad frame: flag it and skip its window.
+            # What step does with a bad frame: flag it, skip this window.
             self.last_bad = "nonfinite"
             self._flag(seen, "nonfinite")
             self._skipped += 1
