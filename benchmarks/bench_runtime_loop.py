@@ -233,8 +233,11 @@ def bare_bind(bundle: Bundle, xs: list[np.ndarray]) -> np.ndarray:
 def loop_latency(loop: StreamLoop, frames: np.ndarray) -> np.ndarray:
     """Per-decision ns of the full loop, frame arrival to decision."""
     loop.reset()
+    # Timestamps at the bundle's frame rate: one per second would make every frame a
+    # gap (the loop's slower time path) and time that instead.
+    rate_hz = loop.bundle.manifest.frame.rate_hz
     return loop.run(
-        ReplaySource(frames, np.arange(len(frames), dtype=np.float64))
+        ReplaySource(frames, np.arange(len(frames), dtype=np.float64) / rate_hz)
     ).latency_ns
 
 
