@@ -59,8 +59,13 @@ counts, the flagged frames with their reasons and the skipped windows are in
 The check costs one ``np.isfinite`` (``np.isinf`` where NaN means missing) into a
 preallocated buffer, a shape and dtype comparison and one subtraction per frame, and
 the same value check on the graph input per decision; only a bad frame takes the
-slower path that names the reason. ``benchmarks/bench_runtime_loop.py`` measures the
-loop's per-frame latency with these checks in place.
+slower path that names the reason. With hop 1, NaN never "missing" and preprocessing
+ops that keep a NaN or infinity non-finite (``keeps_nonfinite`` in
+:mod:`slipkit.runtime.preprocessing`), a frame completing a clean window skips its own
+value check: the graph input's check covers it, and only an input that fails it has
+the frame tested, to name it (``StreamLoop._step_hop1``; same results as the full
+path). ``benchmarks/bench_runtime_loop.py`` and ``benchmarks/bench_deploy.py`` measure
+the loop's per-frame latency with these checks in place.
 """
 
 from __future__ import annotations
