@@ -164,12 +164,15 @@ def test_steady_state_steps_allocate_no_arrays(tmp_path: Path) -> None:
 
 
 def test_steady_state_steps_keep_no_memory_with_onnxruntime(tmp_path: Path) -> None:
-    """With the real session and the GC frozen, 1000 warm steps keep under 4 KiB (no per-frame leak)."""
+    """With the real session and the GC frozen, 1000 warm steps keep under 8 KiB (no per-frame leak)."""
     case = LinearCase(tmp_path, window=64)
     loop = StreamLoop(load_bundle(case.path), capacity=1 << 12)
     frames = [np.array(f, dtype=np.float64) for f in case.frames] * 6
     kept, _ = _steady_memory(loop, frames)
-    assert kept < 4096
+    # onnxruntime's own bookkeeping keeps 2.0-4.6 KiB, varying from run to run (the
+    # loop before the hop-1 fast path too); one Python object (>= 16 B) kept per
+    # frame would be >= 16 KB.
+    assert kept < 8192
 
 
 def test_cli_realtime_options_run_and_report(
