@@ -168,56 +168,93 @@ def _slice(g: GraphBuilder, v: str, start: int, stop: int, axis: int) -> str:
     return g.op("Slice", v, g.const([start], i64), g.const([stop], i64), _axes(g, axis))
 
 
-def _frequency(g: GraphBuilder, x: str, est: StickSlipSpeed, dft_dtype: str) -> str:
-    """Nodes computing ``f_d`` (Hz, float64, NaN when undefined) of the windows ``x`` (b, W).
+def _spectrum(
+    g: GraphBuilder, x: str, est: StickSlipSpeed, dft_dtype: str, rank: int
+) -> str:
+    """Nodes from the windows ``x`` (float64, ``(b, W)`` or, ``rank`` 3, ``(b, W, 1)``)
+    to the power spectrum ``(b, 1, N1 K2)`` in ``dft_dtype``, bin ``k1 + N1 k2`` at
+    ``k1 K2 + k2`` (13 nodes).
 
-    Node count matters more than arithmetic here (a few hundred ns per node at batch 1):
-    comparisons run on the power spectrum (the same order as the magnitude), and a
-    non-finite or constant window needs no test of its own -- a NaN or inf sample makes
-    every DFT bin NaN and a constant window every bin 0, so no bin is a strict local
-    maximum and ``f_d`` is ``0 / 0 = NaN``, the batch estimator's value.
+    The detrended, Hamming-weighted window is a fixed linear combination of four
+    entries of the exclusive cumulative sum ``cs`` of the edge-padded ``xc = x - x[0]``:
+    ``h (cs[t + l + 1] - cs[t + l]) - (h / s) (cs[t + s] - cs[t])`` (the sample, then
+    the moving average; ``l = s // 2``). One ``Gather`` takes the four rows already in
+    the DFT's ``(N1, N2)`` grid (zero padding: index 0 with weight 0), one ``Mul`` and
+    one ``ReduceSum`` combine them: six nodes fewer than slicing, subtracting,
+    dividing, weighting, padding and reshaping. The cumulative sums are float64 and
+    exact for float32 samples of one scale, so the differences are too.
     """
     w = int(est.window)
     nfft = w * int(est.pad_factor)
     s = min(int(est.detrend_frames), w)
-    # 1. detrend: the residual is invariant to a constant shift; subtracting the first
-    # sample (exact in float64 for float32 samples) keeps the cumulative sums small and
-    # makes a constant window exactly 0.
+    i64 = np.int64
+    # the residual is invariant to a constant shift; subtracting the first sample
+    # (exact in float64 for float32 samples) keeps the cumulative sums small and makes
+    # a constant window exactly 0
     xc = g.op("Sub", x, _slice(g, x, 0, 1, 1), stem="xc")
     left = s // 2  # uniform_filter1d's centre, for odd and even sizes
     # edge padding, one extra sample on the right so the exclusive cumsum has W + s values
-    pads = g.const([0, left, 0, s - left], np.int64)
+    tail = [0] if rank == 3 else []
+    pads = g.const([0, left, *tail, 0, s - left, *tail], i64)
     padded = g.op("Pad", xc, pads, mode="edge", stem="padded")
-    cs0 = g.op("CumSum", padded, g.const(1, np.int64), exclusive=1, stem="cs0")
-    diff = g.op("Sub", _slice(g, cs0, s, s + w, 1), _slice(g, cs0, 0, w, 1))
-    trend = g.op("Div", diff, _d(g, float(s)), stem="trend")
-    resid = g.op("Sub", xc, trend, stem="resid")
-    # 2. Hamming window, zero padding, two-stage real DFT (dft_matrices)
-    xw = g.op("Mul", resid, _d(g, np.hamming(w)), stem="windowed")
+    cs = g.op("CumSum", padded, g.const(1, i64), exclusive=1, stem="cs")
+    diff = g.op("Sub", _slice(g, cs, s, s + w, 1), _slice(g, cs, 0, w, 1))
+    # h (xc - diff / s): the Hamming weights and 1 / s as two constant Muls
+    shape = (w, 1) if rank == 3 else (w,)
+    h = np.hamming(w)
+    xw = g.op(
+        "Sub",
+        g.op("Mul", xc, _d(g, h.reshape(shape))),
+        g.op("Mul", diff, _d(g, (h / s).reshape(shape))),
+        stem="windowed",
+    )
     if nfft > w:
-        xw = g.op("Pad", xw, g.const([0, 0, 0, nfft - w], np.int64), stem="zero_padded")
+        pad = [0, 0, *tail, 0, nfft - w, *tail]
+        xw = g.op("Pad", xw, g.const(pad, i64), stem="zero_padded")
     f1, gm, n1, k2n = dft_matrices(nfft)
     n2 = nfft // n1
     dt = np.float32 if dft_dtype == "float32" else np.float64
     if dt is np.float32:
         xw = g.op("Cast", xw, to=FLOAT)
-    grid = g.op("Reshape", xw, g.const([-1, n1, n2], np.int64), stem="grid")
+    grid = g.op("Reshape", xw, g.const([-1, n1, n2], i64), stem="grid")
     # F1's rows interleaved per k1 (cos row, then -sin row), so that A reshapes to
     # (b, N1, 1, 2 N2): [A_re, A_im] of each k1 as one row, and stage 2 is N1 products
-    # of one 2 N2 row by G[k1] (no sum of separate re / im halves: one node and half
-    # the batched products fewer than the split form, the same constants and float
-    # roundings as before, so the same spectrum)
+    # of one 2 N2 row by G[k1]; G's columns interleave re and im per k2, so that the
+    # product reshapes to (b, 1, N1 K2, 2) and one ReduceSumSquare gives the power
     f1i = f1.reshape(2, n1, n1).transpose(1, 0, 2).reshape(2 * n1, n1)
     a = g.op("MatMul", g.const(f1i, dt), grid, stem="stage1")  # (b, 2 N1, N2)
-    a = g.op("Reshape", a, g.const([-1, n1, 1, 2 * n2], np.int64))
-    y = g.op("MatMul", a, g.const(gm, dt), stem="stage2")  # (b, N1, 1, 2 K2)
-    y = g.op("Reshape", y, g.const([-1, n1, 2, k2n], np.int64))
-    power = _reduce(g, "ReduceSumSquare", y, (2,), 0)  # (b, N1, K2), bin k1 + N1 k2
-    power = g.op("Reshape", power, g.const([-1, n1 * k2n], np.int64), stem="power")
-    last = nfft // 2
+    a = g.op("Reshape", a, g.const([-1, n1, 1, 2 * n2], i64))
+    gi = gm.reshape(n1, 2 * n2, 2, k2n).transpose(0, 1, 3, 2).reshape(n1, 2 * n2, -1)
+    y = g.op("MatMul", a, g.const(gi, dt), stem="stage2")  # (b, N1, 1, 2 K2)
+    y = g.op("Reshape", y, g.const([-1, 1, n1 * k2n, 2], i64))
+    return _reduce(g, "ReduceSumSquare", y, (3,), 0)  # (b, 1, N1 K2)
+
+
+def _bin_positions(nfft: int) -> NDArray[np.intp]:
+    """``pos[k]``: where DFT bin ``k`` (0 .. nfft / 2) sits in :func:`_spectrum`'s output."""
+    n1, k2n = _dims(nfft)
     ks = (np.arange(n1)[:, None] + n1 * np.arange(k2n)[None, :]).reshape(-1)
-    pos = np.argsort(ks)[: last + 1]  # pos[k]: where bin k sits in ``power``
-    return _peak_frequency(g, power, pos, n1 * k2n, est, dt)
+    return np.argsort(ks)[: nfft // 2 + 1]
+
+
+def _dims(nfft: int) -> tuple[int, int]:
+    """``(N1, K2)`` of :func:`dft_matrices` without building the matrices."""
+    n1, _ = _factor(int(nfft))
+    return n1, (int(nfft) // 2) // n1 + 1
+
+
+def _frequency(g: GraphBuilder, x: str, est: StickSlipSpeed, dft_dtype: str) -> str:
+    """Nodes computing ``f_d`` (Hz, float64, NaN when undefined) of the windows ``x`` (b, W).
+
+    (:mod:`slipkit.export.spectral`'s entry: the speed graph itself uses
+    :func:`_spectrum` and :func:`_peak_value` without the NaN.)
+    """
+    nfft = int(est.window) * int(est.pad_factor)
+    power = _spectrum(g, x, est, dft_dtype, rank=2)
+    dt = np.float32 if dft_dtype == "float32" else np.float64
+    n1, k2n = _dims(nfft)
+    f = _peak_value(g, power, _bin_positions(nfft), n1 * k2n, est, dt)
+    return g.op("Where", g.op("Greater", f, _d(g, 0.0)), f, _d(g, math.nan))
 
 
 def _peak_frequency(
@@ -230,13 +267,62 @@ def _peak_frequency(
 ) -> str:
     """Nodes from the power spectrum ``power`` (b, n_power) to ``f_d`` (Hz, float64, NaN).
 
-    ``pos[k]`` is where DFT bin ``k`` (0 .. nfft / 2) sits along ``power``'s axis 1;
+    ``pos[k]`` is where DFT bin ``k`` (0 .. nfft / 2) sits along ``power``'s axis 1
+    (:func:`_peak_value` with a NaN where it gives 0).
+    """
+    p3 = g.op("Reshape", power, g.const([-1, 1, n_power], np.int64))
+    f = _peak_value(g, p3, pos, n_power, est, dt)
+    return g.op("Where", g.op("Greater", f, _d(g, 0.0)), f, _d(g, math.nan))
+
+
+def rank_weights(n_peaks: int, k: int) -> tuple[FloatArray, FloatArray]:
+    """Eq. 6-7's weights of the ``k`` largest peaks: increments ``d`` and offsets ``beta``.
+
+    With ``L`` peaks (``L <= k <= n_peaks``) sorted largest first, eq. 6's "mean over
+    ``j = 1..n_peaks`` of the top-``j`` means" (the mean of all ``L`` for ``j > L``) is
+    ``sum_r q_r w(r, L)`` with ``w(r, L) = alpha(L) - beta_r`` for ``r <= L``:
+    ``alpha(L) = (H_L + n_peaks / L - 1) / n_peaks``, ``beta_r = H_{r - 1} / n_peaks``
+    (``H`` the harmonic numbers). ``alpha(L) = sum_{r <= L} d_r`` (``d_r = alpha(r) -
+    alpha(r - 1)``, ``alpha(0) = 0``), so with the 0/1 indicator ``v`` of the ``L``
+    valid ranks (a prefix), ``alpha(L) = v @ d``: no lookup by ``L`` in the graph.
+    The weights of ``L`` peaks sum to 1.
+
+    Returns
+    -------
+    d, beta : ndarray (k,)
+    """
+    n = int(n_peaks)
+    r = np.arange(1, int(k) + 1, dtype=np.float64)
+    harm = np.concatenate([[0.0], np.cumsum(1.0 / r)])  # H_0 .. H_k
+    alpha = np.concatenate([[0.0], (harm[1:] + n / r - 1.0) / n])
+    return np.diff(alpha), harm[:-1] / n
+
+
+def _peak_value(
+    g: GraphBuilder,
+    power: str,
+    pos: NDArray[np.intp],
+    n_power: int,
+    est: StickSlipSpeed,
+    dt: type[np.floating[Any]],
+    scale: float = 1.0,
+    shift: float = 0.0,
+) -> str:
+    """Nodes from the power spectrum ``power`` (b, 1, n_power) to ``scale f_d + shift``
+    (float64, ``(b,)``), exactly 0 where ``f_d`` is undefined.
+
+    ``pos[k]`` is where DFT bin ``k`` (0 .. nfft / 2) sits along ``power``'s axis 2;
     other entries are ignored. Steps 3 (peaks, eqs. 6-7) and the gate of the module
-    docstring.
+    docstring. ``scale`` and ``shift`` (the speed table's index, :func:`_speed`) are
+    folded into the per-bin frequencies: eq. 6-7's weights of an ``f_max`` with a peak
+    sum to 1, so the weighted mean of ``scale q + shift`` is ``scale f + shift``; an
+    ``f_max`` without a peak adds 0 to the sum and to the count, and with no peak at
+    all the sum is 0 and the count clamped to 1.
     """
     rate = float(est.rate_hz)
     nfft = int(est.window) * int(est.pad_factor)
     last = nfft // 2
+    i64 = np.int64
     # 3. peaks: interior bins 1..c with freq <= the largest f_max (find_peaks skips the ends)
     freqs = np.fft.rfftfreq(nfft, 1.0 / rate)
     fmax = f_max_values(tuple(est.f_max_range), float(est.f_max_step))
@@ -246,129 +332,147 @@ def _peak_frequency(
             f"StickSlipSpeed export: no DFT bin between 0 Hz and f_max {fmax[-1]:g} Hz "
             f"(resolution {rate / nfft:g} Hz); widen window or f_max_range"
         )
-
-    def bins(lo: int) -> str:
-        return g.op("Gather", power, g.const(pos[lo : lo + c], np.int64), axis=1)
-
-    mid = bins(1)
-    # the largest magnitude of the spectrum, DC excluded (bins beyond nfft / 2 masked)
-    # (min_peak_ratio squared, on power, folded into the mask: the largest of
-    # ratio2 x power is ratio2 x the largest, the same float product)
-    ratio2 = float(est.min_peak_ratio) ** 2  # on power
+    # the (bin - 1, bin, bin + 1) powers of bins 1..c in one Gather, split in three
+    trip = g.op(
+        "Gather",
+        power,
+        g.const(np.concatenate([pos[d : d + c] for d in (0, 1, 2)]), i64),
+        axis=2,
+    )  # (b, 1, 3 c)
+    lower, mid, upper = (g._fresh(n) for n in ("lower", "mid", "upper"))
+    split = {"num_outputs": 3} if g.opset >= 18 else {}
+    g.nodes.append(
+        helper.make_node("Split", [trip], [lower, mid, upper], axis=2, **split)
+    )
+    # min_peak_ratio (squared, on power) against the largest bin of the whole spectrum
+    # (DC excluded), folded into the mask, times (1 - eps): "mid >= r x max" is then
+    # "mid > the float just below r x max", so one Greater against Max(lower, upper,
+    # threshold) is the strict local maximum and the ratio rule together (the
+    # product's rounding moves the threshold by one ulp, far inside the 1e-6 of the
+    # float32 spectrum)
+    eps = float(np.finfo(dt).eps) / 2.0
+    ratio2 = float(est.min_peak_ratio) ** 2 * (1.0 - eps)
     spectrum = np.isin(np.arange(n_power), pos[1:]) * ratio2
-    masked = g.op("Mul", power, g.const(spectrum, dt))
-    gmax_r = _reduce(g, "ReduceMax", masked, (1,), 1)
-    lower, upper = bins(0), bins(2)
-    peak = g.op(
-        "And",
-        g.op("And", g.op("Greater", mid, lower), g.op("Greater", mid, upper)),
-        g.op("GreaterOrEqual", mid, gmax_r),
-        stem="peak",
-    )  # (b, c)
     gate = float(getattr(est, "min_peak_to_mean", 0.0) or 0.0)
     if gate > 0.0:
         # no stick-slip oscillation: the largest bin of the gate band is not gate x
-        # the band's mean power (gate_first_bin); then no peak counts, f_d is NaN
+        # the band's mean power (gate_first_bin); then the threshold is +inf, no peak
+        # counts, f_d is undefined. Both maxima from one (2, n_power) product.
         k0 = gate_first_bin(nfft, min(int(est.detrend_frames), int(est.window)))
         in_band = np.isin(np.arange(n_power), pos[k0:])
-        band = g.op("Mul", power, g.const(in_band, dt))
+        both = _reduce(
+            g,
+            "ReduceMax",
+            g.op("Mul", power, g.const(np.stack([spectrum, in_band]), dt)),
+            (2,),
+            1,
+        )  # (b, 2, 1)
+        gmax_r, bmax = g._fresh("gmax_r"), g._fresh("bmax")
+        split = {"num_outputs": 2} if g.opset >= 18 else {}
+        g.nodes.append(
+            helper.make_node("Split", [both], [gmax_r, bmax], axis=1, **split)
+        )
         # gate x the band's mean power: one MatMul with the weights gate / n_band
         mean = g.op(
             "MatMul", power, g.const((in_band * (gate / (last + 1 - k0)))[:, None], dt)
         )
-        bmax = _reduce(g, "ReduceMax", band, (1,), 1)
-        peak = g.op("And", peak, g.op("GreaterOrEqual", bmax, mean), stem="gated")
+        thr = g.op(
+            "Where",
+            g.op("GreaterOrEqual", bmax, mean),
+            gmax_r,
+            g.const(np.inf, dt),
+            stem="threshold",
+        )
+    else:
+        thr = _reduce(
+            g, "ReduceMax", g.op("Mul", power, g.const(spectrum, dt)), (2,), 1
+        )
+    peak = g.op(
+        "Greater", mid, g.op("Max", lower, upper, thr), stem="peak"
+    )  # (b, 1, c)
     if est.harmonics == "fundamental":
         # a counted peak at ~m x a lower counted peak is a harmonic: one MatMul with a
         # constant (c, c) relation of the bins (harmonic_mask's rule on bin numbers)
-        # (in float32: counts of a few 0/1 products are exact, and MLAS's float32
-        # kernel is the fast one)
+        # minus 4096 on the diagonal, so that "a peak and no hit" is one Less (in
+        # float32: sums of a few 0/1 products and 4096 are exact)
         rel = harmonic_relation(np.arange(1, c + 1), float(est.harmonic_tol))
+        big = 4096.0
         hits = g.op(
             "MatMul",
             g.op("Cast", peak, to=FLOAT),
-            g.const(rel.astype(np.float32), np.float32),
+            g.const(rel.astype(np.float32) - big * np.eye(c, dtype=np.float32)),
         )
-        peak = g.op(
-            "And",
-            peak,
-            g.op("Less", hits, g.const(0.5, np.float32)),
-            stem="fundamental",
-        )
-    # a peak's power, -1 for other bins; per f_max, -inf above it (one broadcast Add:
-    # the (n_fmax, c) tensors are the graph's largest after the DFT)
+        peak = g.op("Less", hits, g.const(0.5 - big, np.float32), stem="fundamental")
+    # a counted peak's power, -1 for other bins; per f_max, -inf above it (one
+    # broadcast Add to (b, n_fmax, c)), then the top k per f_max (ties: the lower bin,
+    # as the batch sort)
     score = g.op("Where", peak, mid, g.const(-1.0, dt))
     below = freqs[1 : c + 1][None, :] <= fmax[:, None]  # (n_fmax, c)
     ranked = g.op(
-        "Add",
-        g.op("Unsqueeze", score, _axes(g, 1)),
-        g.const(np.where(below, 0.0, -np.inf), dt),
-        stem="ranked",
+        "Add", score, g.const(np.where(below, 0.0, -np.inf), dt), stem="ranked"
     )
     k = min(int(est.n_peaks), c)
-    top, idx = _topk(g, ranked, k)  # (b, n_fmax, k), largest first, ties: lower bin
-    is_valid = g.op("GreaterOrEqual", top, g.const(0.0, dt))
-    valid = g.op("Cast", is_valid, to=DOUBLE, stem="valid")
-    # every frequency is divided by n_peaks here (folded into constants), so that
-    # eq. 6-7's mean below is one Div
-    n_peaks = int(est.n_peaks)
+    top, idx = _topk(g, ranked, k)  # (b, n_fmax, k), largest first
+    # the per-bin value q (scale x frequency + shift, > 0), 0 for bins not counted
     bin_hz = float(freqs[1] - freqs[0])
+    q0 = scale * np.arange(1, c + 1, dtype=np.float64) * bin_hz + shift
     if est.interpolate:
         # the parabola through the log powers (= 2 log magnitudes: the vertex offset is
-        # the same) of each bin and its neighbours, as parabolic_offset, in few nodes:
-        # one Gather of the (bin - 1, bin, bin + 1) powers (b, 3, c), their log (powers
-        # clamped to the smallest normal float32: a zero bin has a finite log), then
+        # the same) of each bin and its neighbours, as parabolic_offset: their log
+        # (powers clamped to the smallest normal float32: a zero bin has a finite log),
         # one constant MatMul (2, 3) for the offset's numerator ``h (a - c)`` and its
-        # denominator ``a - 2 b + c`` (h = half a bin / n_peaks, so the offset comes out
-        # in Hz / n_peaks), Clip to +-h. No den < 0 test: a strict maximum has one, and
-        # other bins (possibly 0 / 0) are dropped by the ``Where`` on ``valid`` below.
-        trip = g.op(
-            "Gather",
-            power,
-            g.const(np.stack([pos[d : d + c] for d in (0, 1, 2)]), np.int64),
-            axis=1,
-        )  # (b, 3, c)
+        # denominator ``a - 2 b + c`` (h = half a bin, times scale), Clip to +-h. No
+        # den < 0 test: a strict maximum has one, and other bins are dropped below.
         logp = g.op("Log", g.op("Max", trip, g.const(np.finfo(np.float32).tiny, dt)))
         if dt is np.float32:
             logp = g.op("Cast", logp, to=DOUBLE)
-        half = 0.5 * bin_hz / n_peaks
+        logp = g.op("Reshape", logp, g.const([-1, 3, c], i64))
+        half = 0.5 * bin_hz * scale
         nd = g.op("MatMul", _d(g, [[half, 0.0, -half], [1.0, -2.0, 1.0]]), logp)
         num, den = g._fresh("num"), g._fresh("den")
         split = {"num_outputs": 2} if g.opset >= 18 else {}
         g.nodes.append(helper.make_node("Split", [nd], [num, den], axis=1, **split))
         off = g.op("Clip", g.op("Div", num, den), _d(g, -half), _d(g, half))
-        fb = g.op(
-            "Add",
-            off,
-            _d(g, np.arange(1, c + 1, dtype=np.float64) * bin_hz / n_peaks),
-            stem="peak_hz",
-        )  # (b, 1, c), Hz / n_peaks
-        fb = g.op("Expand", fb, g.const([1, len(fmax), c], np.int64))
-        ftop = g.op(
-            "Where", is_valid, g.op("GatherElements", fb, idx, axis=2), _d(g, 0.0)
-        )
+        q = g.op("Add", off, _d(g, q0), stem="peak_value")  # (b, 1, c)
     else:
-        ftop = g.op(
-            "Mul",
-            g.op("Gather", _d(g, freqs[1 : c + 1] / n_peaks), idx, axis=0),
-            valid,
+        q = _d(g, q0)
+    # per f_max and rank, the value of the ranked bin (0 for bins not counted): one
+    # GatherElements on the (b, 1, c) values with the indices as (b, 1, n_fmax k)
+    # (a broadcast of the values to (b, n_fmax, c) costs more than the two reshapes)
+    qm = g.op("Where", peak, q, _d(g, 0.0))
+    n_fmax = len(fmax)
+    flat = g.op("Reshape", idx, g.const([-1, 1, n_fmax * k], i64))
+    qtop = g.op(
+        "Reshape",
+        g.op("GatherElements", qm, flat, axis=2),
+        g.const([-1, n_fmax, k], i64),
+        stem="qtop",
+    )  # (b, n_fmax, k)
+    if int(below.sum(axis=1).min()) < k:
+        # an f_max with fewer than k bins below it: its -inf entries are bins above it
+        qtop = g.op(
+            "Where", g.op("GreaterOrEqual", top, g.const(0.0, dt)), qtop, _d(g, 0.0)
         )
-    n_valid = g.op("ReduceSum", valid, _axes(g, 2), keepdims=1, stem="n_valid")  # L
-    n_div = g.op("Max", n_valid, _d(g, 1.0))
-    csf = g.op("CumSum", ftop, g.const(2, np.int64), stem="csf")
-    # top-j mean: cumsum_j / j while j <= L, the mean of all L beyond (eq. 6, as batch);
-    # an f_max without a peak adds 0 to the sum and 0 to the count (eq. 7's nanmean)
-    denom = g.op("Min", _d(g, np.arange(1, k + 1, dtype=np.float64)), n_div)
-    quot = g.op("Div", csf, denom)
-    if n_peaks > k:  # more ranks than candidate bins: the rest are the mean of all
-        total = _slice(g, csf, k - 1, k, 2)
-        rest = g.op("Mul", g.op("Div", total, n_div), _d(g, float(n_peaks - k)))
-        quot = g.op("Concat", quot, rest, axis=2)
-    num = g.op("ReduceSum", quot, _axes(g, 1, 2), keepdims=0)
-    den = g.op(
-        "ReduceSum", g.op("Min", n_valid, _d(g, 1.0)), _axes(g, 1, 2), keepdims=0
+    # eq. 6-7 (rank_weights): per f_max, sum_r q_r (alpha(L) - beta_r) =
+    # (v @ d) (q @ 1) - q @ beta with v = sign(q) the valid ranks; P = v @ [d, e1]
+    # (alpha, "has a peak"), Q = q @ [1, -beta]: the sum over f_max of P * Q is the
+    # numerator (-beta's column times "has a peak" is itself), of P's second column
+    # the count
+    d, beta = rank_weights(int(est.n_peaks), k)
+    e1 = np.zeros(k)
+    e1[0] = 1.0
+    valid = g.op("Sign", qtop, stem="valid")
+    pm = g.op("MatMul", valid, _d(g, np.stack([d, e1], axis=1)))  # (b, n_fmax, 2)
+    qm2 = g.op("MatMul", qtop, _d(g, np.stack([np.ones(k), -beta], axis=1)))
+    num = _reduce(g, "ReduceSum", g.op("Mul", pm, qm2), (1, 2), 0)
+    count = g.op(
+        "Gather",
+        _reduce(g, "ReduceSum", pm, (1,), 0),
+        g.const(1, i64),
+        axis=1,
+        stem="n_fmax",
     )
-    return g.op("Div", num, den, stem="f_d")
+    return g.op("Div", num, g.op("Max", count, _d(g, 1.0)), stem="f_value")
 
 
 def _topk(g: GraphBuilder, values: str, k: int) -> tuple[str, str]:
@@ -429,39 +533,66 @@ TABLE_MIN, TABLE_MAX = 4096, 1 << 16
 TABLE_REL_TOL = 1e-7
 
 
-def _speed(g: GraphBuilder, f: str, est: StickSlipSpeed) -> tuple[str, dict[str, Any]]:
-    """Nodes computing the speed (mm/s, NaN when undefined) from ``f`` (Hz), and a note."""
-    if est.form == "paper":
-        # v = c / (1 / f - pi / w0): closed form, needs f < w0 / pi (NaN compares False)
-        rest = g.op("Sub", g.op("Reciprocal", f), _d(g, math.pi / float(est.w0_)))
-        v = g.op("Div", _d(g, 1e3 * float(est.stick_length_m_)), rest)
-        ok = g.op("Greater", rest, _d(g, 0.0))
-        return g.op("Where", ok, v, _d(g, math.nan), stem="speed"), {
-            "speed": "closed form"
-        }
-    # exact form: a table of the batch bisection, linear interpolation (speed_table)
+def _speed_index(est: StickSlipSpeed) -> tuple[float, float, dict[str, Any]]:
+    """The exact form's table (:func:`speed_table`) as the graph reads it.
+
+    Returns ``scale``, ``shift`` (the row coordinate ``u = scale f + shift`` of a
+    frequency ``f`` in Hz: ``u = 2`` at the table's first frequency) and the
+    arrays ``a``, ``b`` of the rows (``speed = a[i] + b[i] u`` for ``i = floor(u)``)
+    with the table's error, in a dict. Row 0 is "no estimate" (``a = NO_SCORE``,
+    ``b = 0``: ``u = 0`` exactly when there is no peak), row 1 extends the first
+    segment below the first frequency (rounding), rows ``2 .. n`` are the ``n - 1``
+    segments, row ``n + 1`` extends the last one above the table (rounding) or, when
+    the ``f_max`` range reaches saturation, is "no estimate" too.
+    """
     ft, vt, err = speed_table(est, TABLE_REL_TOL)
     f0, df, n = float(ft[0]), float(ft[1] - ft[0]), len(ft)
-    isnan = g.op("IsNaN", f)
-    u = g.op(
-        "Div", g.op("Sub", g.op("Where", isnan, _d(g, f0), f), _d(g, f0)), _d(g, df)
+    seg = np.clip(np.arange(n + 2) - 2, 0, n - 2)
+    slope = np.diff(vt)[seg]
+    a = vt[seg] - slope * (seg + 2)
+    b = slope.copy()
+    a[0], b[0] = NO_SCORE, 0.0
+    top = f_max_values(tuple(est.f_max_range), float(est.f_max_step))[-1]
+    if est.interpolate:
+        top = top + 0.5 * float(est.rate_hz) / (int(est.window) * int(est.pad_factor))
+    if float(est.saturation_hz_) <= top:
+        a[-1], b[-1] = NO_SCORE, 0.0
+    note = {"a": a, "b": b, "n": n, "err": err}
+    return 1.0 / df, 2.0 - f0 / df, note
+
+
+def _speed(
+    g: GraphBuilder, u: str, est: StickSlipSpeed, table: dict[str, Any] | None
+) -> tuple[str, dict[str, Any]]:
+    """Nodes from :func:`_peak_value`'s ``u`` (``(b,)``, 0 without an estimate) to the
+    float64 score (mm/s, :data:`NO_SCORE` where undefined), and a note.
+
+    ``form="paper"``: ``u`` is ``f_d`` in Hz and the speed is ``c / (1 / f - pi /
+    w0)`` in closed form (``f = 0`` gives 0, not a speed; ``f`` at or above ``w0 /
+    pi`` a negative speed: both :data:`NO_SCORE`). ``form="exact"``: ``u`` is the
+    table's row coordinate (:func:`_speed_index`) and the speed one ``a + b u`` of
+    the row ``floor(u)`` (the cast to int64 truncates, ``u >= 0``).
+    """
+    if table is None:
+        rest = g.op("Sub", g.op("Reciprocal", u), _d(g, math.pi / float(est.w0_)))
+        v = g.op("Div", _d(g, 1e3 * float(est.stick_length_m_)), rest)
+        v = g.op("Where", g.op("Greater", v, _d(g, 0.0)), v, _d(g, NO_SCORE))
+        # a huge speed close below saturation stays a finite float32
+        v = g.op("Clip", v, _d(g, NO_SCORE), _d(g, _F32_MAX), stem="speed")
+        return v, {"speed": "closed form"}
+    n = int(table["n"])
+    row = g.op(
+        "Cast",
+        g.op("Clip", u, _d(g, 0.0), _d(g, n + 1.0)),
+        to=int(onnx.TensorProto.INT64),
     )
-    u = g.op("Clip", u, _d(g, 0.0), _d(g, n - 1.0))  # f_d lies in the table's range
-    i0 = g.op("Floor", g.op("Min", u, _d(g, n - 2.0)))
-    idx = g.op("Cast", i0, to=int(onnx.TensorProto.INT64))
-    base = g.op("Gather", _d(g, vt[:-1]), idx, axis=0)
-    slope = g.op("Gather", _d(g, np.diff(vt)), idx, axis=0)
-    v = g.op("Add", base, g.op("Mul", slope, g.op("Sub", u, i0)))
-    bad = isnan
-    if float(est.saturation_hz_) <= float(ft[-1]) / (1.0 - 1e-9) * (1.0 + 1e-12) or (
-        f_max_values(tuple(est.f_max_range), float(est.f_max_step))[-1]
-        >= est.saturation_hz_
-    ):
-        bad = g.op(
-            "Or", bad, g.op("GreaterOrEqual", f, _d(g, float(est.saturation_hz_)))
-        )
-    note = {"speed": "table", "table_size": n, "table_rel_err": err}
-    return g.op("Where", bad, _d(g, math.nan), v, stem="speed"), note
+    v = g.op(
+        "Add",
+        g.op("Gather", _d(g, table["a"]), row, axis=0),
+        g.op("Mul", g.op("Gather", _d(g, table["b"]), row, axis=0), u),
+        stem="speed",
+    )
+    return v, {"speed": "table", "table_size": n, "table_rel_err": table["err"]}
 
 
 def export_stick_slip_speed(
@@ -527,6 +658,10 @@ def export_stick_slip_speed(
     w = int(estimator.window)
     g = GraphBuilder(f"stick_slip_{quantity}", opset)
     steps: tuple[dict[str, Any], ...] = ()
+    dt = np.float32 if dft_dtype == "float32" else np.float64
+    scale, shift, table = 1.0, 0.0, None
+    if quantity == "speed" and estimator.form != "paper":
+        scale, shift, table = _speed_index(estimator)
     if incremental:
         why = incremental_problem(estimator)
         if why is not None:
@@ -534,30 +669,28 @@ def export_stick_slip_speed(
         nb = w * int(estimator.pad_factor) // 2 + 1
         steps = (sliding_spectrum_step(estimator),)
         inp = helper.make_tensor_value_info(WINDOW_INPUT, FLOAT, ["batch", nb])
-        dt = np.float32 if dft_dtype == "float32" else np.float64
         power = (
             WINDOW_INPUT if dt is np.float32 else g.op("Cast", WINDOW_INPUT, to=DOUBLE)
         )
-        value = _peak_frequency(g, power, np.arange(nb), nb, estimator, dt)
+        power = g.op("Reshape", power, g.const([-1, 1, nb], np.int64))
+        value = _peak_value(g, power, np.arange(nb), nb, estimator, dt, scale, shift)
     else:
         inp = helper.make_tensor_value_info(WINDOW_INPUT, FLOAT, ["batch", w, 1])
-        x = g.op(
-            "Reshape",
-            g.op("Cast", WINDOW_INPUT, to=DOUBLE),
-            g.const([-1, w], np.int64),
-            stem="x",
+        x = g.op("Cast", WINDOW_INPUT, to=DOUBLE, stem="x")  # (b, W, 1)
+        nfft = w * int(estimator.pad_factor)
+        n1, k2n = _dims(nfft)
+        power = _spectrum(g, x, estimator, dft_dtype, rank=3)
+        value = _peak_value(
+            g, power, _bin_positions(nfft), n1 * k2n, estimator, dt, scale, shift
         )
-        value = _frequency(g, x, estimator, dft_dtype)
     note: dict[str, Any] = {}
     if quantity == "speed":
-        value, note = _speed(g, value, estimator)
-    # NaN (no estimate) -> NO_SCORE; clip so a huge speed stays a finite float32
-    score64 = g.op(
-        "Where",
-        g.op("IsNaN", value),
-        _d(g, NO_SCORE),
-        g.op("Clip", value, _d(g, NO_SCORE), _d(g, _F32_MAX)),
-    )
+        score64, note = _speed(g, value, estimator, table)
+    else:
+        # f_d (Hz, bounded by the largest f_max); 0 (no peak) -> NO_SCORE
+        score64 = g.op(
+            "Where", g.op("Greater", value, _d(g, 0.0)), value, _d(g, NO_SCORE)
+        )
     g.nodes.append(helper.make_node("Cast", [score64], [SCORE], to=FLOAT))
     unit = "mm/s" if quantity == "speed" else "Hz"
     lo, hi = (float(v) for v in estimator.f_max_range)
