@@ -26,6 +26,7 @@ from slipkit.export.sliptack import (
     export_speed_slip_detector,
     export_stick_slip_speed,
     graph_speeds,
+    peak_ranks,
 )
 
 RATE = 1000.0
@@ -333,3 +334,47 @@ def test_export_bundle_loop_decides_as_the_batch_estimator(tmp_path: Path) -> No
     assert 0 < int(res.slip.sum()) < len(res.slip)  # both decisions occur
     finite = np.isfinite(ref)
     np.testing.assert_allclose(res.score[finite], ref[finite], rtol=SPEED_RTOL)
+
+
+@pytest.mark.parametrize("n_peaks", [1, 3, 10])
+def test_peak_rank_weights_give_the_mean_of_top_j_means(n_peaks: int) -> None:
+    """For L = 1..n_peaks sorted values, (H_L + n / L - 1) sum q - sum H(r - 1) q_r is n_peaks x eq. 6's mean."""
+    _, _, (alpha_n, has_n) = peak_ranks(np.arange(1.0, 4.0), np.array([3.0]), n_peaks)
+    q = np.random.default_rng(n_peaks).uniform(10.0, 90.0, n_peaks)
+    harm = np.concatenate([[0.0], np.cumsum(1.0 / np.arange(1, n_peaks + 1))])
+    for ell in range(1, n_peaks + 1):
+        p = q[:ell]
+        top_j = np.cumsum(p) / np.arange(1, ell + 1)
+        expected = float(np.mean(top_j[np.minimum(np.arange(1, n_peaks + 1), ell) - 1]))
+        ours = (alpha_n[ell] * p.sum() - float(harm[:ell] @ p)) / has_n[ell]
+        assert expected == pytest.approx(ours, rel=1e-12)
+
+
+def test_many_peaks_and_shared_f_max_columns_match_batch() -> None:
+    """Every local maximum counted (ratio 0, up to (c + 1) / 2 peaks) and f_max values sharing their bins (pad 2, step 0.25 Hz): graph speeds equal the batch estimator's."""
+    est = _fitted(
+        min_peak_ratio=0.0,
+        f_max_range=(15.0, 40.0),
+        f_max_step=0.25,
+        pad_factor=2,
+        interpolate=True,
+    )
+    cols, mult, _ = peak_ranks(
+        np.fft.rfftfreq(2 * W, 1.0 / RATE)[1:81], np.arange(15.0, 40.01, 0.25), 10
+    )
+    assert (51, 101) == (cols.shape[1], int(mult.sum()))
+    graph = export_stick_slip_speed(est)
+    rng = np.random.default_rng(5)
+    t = np.arange(W) / RATE
+    windows = np.stack(
+        [
+            0.2 * np.sin(2 * np.pi * f * t) + rng.normal(0.0, 0.05, W)
+            for f in rng.uniform(12.0, 45.0, 12)
+        ]
+    )[:, :, None]
+    ours = _run(graph, windows)
+    ref = np.array(
+        [est.speed_from_frequency(est.segment_frequency(w))[0] for w in windows]
+    )
+    assert np.array_equal(np.isfinite(ref), np.isfinite(ours))
+    np.testing.assert_allclose(ours, ref, rtol=SPEED_RTOL, equal_nan=True)

@@ -24,32 +24,45 @@ oldest first, and returns ``score`` ``(batch,)`` float32:
    relative, far below the gaps between the peaks the rule compares);
 3. **peaks** (eqs. 6-7): strict local maxima of the power spectrum below the largest
    ``f_max``, the ``min_peak_ratio`` rule (squared, on power) against the largest bin of
-   the whole spectrum (DC excluded), then per ``f_max`` a ``TopK`` of the peaks at or
-   below it (ties: the lower bin, as the batch sort) and the mean over ``j = 1..n_peaks``
-   of the top-``j`` means; ``f_d`` is their mean over the ``f_max`` values with a peak.
-   Constants are folded where the float result is the same or within rounding (the
-   ratio into the mask of the largest bin, ``1 / n_peaks`` into the frequencies, the
-   gate's mean into one ``MatMul``), the harmonic relation runs in float32 (exact
-   counts), and the interpolation is one ``Gather`` of the bin triples and one ``(2,
-   3)`` ``MatMul`` for the vertex offset's numerator and denominator (96 -> 84 nodes for
-   the shipped detector config, with the DFT's; a zero-power neighbour of a peak, never seen in noisy
-   data, gets a clipped offset where the batch form's is 0);
+   the whole spectrum (DC excluded) and the gate, as one ``Greater`` of each bin against
+   ``Max(lower, upper, threshold)`` (the ratio times ``1 - eps``, so ``>=`` becomes
+   ``>``; a failed gate makes the threshold ``+inf``); the harmonic rule as one
+   ``MatMul`` + ``Less``. The counted peaks are sorted once by power (one ``TopK`` of
+   ``(c + 1) // 2``; ties: the lower bin, as the batch sort), their rank among the
+   peaks at or below each ``f_max`` is one ``CumSum`` of a constant eligibility table
+   gathered in sorted order, and eq. 6's "mean over ``j = 1..n_peaks`` of the top-``j``
+   means" is a fixed weighted sum of the top ``L = min(count, n_peaks)`` values
+   (:func:`peak_ranks`): two ``MatMul`` products and lookups by ``L`` per ``f_max``, no
+   ``TopK`` per ``f_max`` row. ``f_d`` is the mean over the ``f_max`` values with a
+   peak (``f_max`` values between the same two bins share one column, weighted by
+   their number). The interpolation is one log-parabola per candidate bin (one
+   ``(2, 3)`` ``MatMul`` for the vertex offset's numerator and denominator; a
+   zero-power neighbour of a peak, never seen in noisy data, gets a clipped offset
+   where the batch form's is 0);
 4. **speed** (eq. 3 inverted): ``form="paper"`` in closed form; ``form="exact"`` by
    linear interpolation in a table of the batch bisection over the frequencies ``f_d``
    can take (:func:`speed_table`: from the DFT resolution to the largest ``f_max``,
-   16384 entries for the default detector, within 1e-7 relative of the bisection). An
-   unrolled bisection or Newton iteration is exact too but costs ~8 graph nodes per
-   step, and node count, not arithmetic, dominates a batch-1 call.
+   16384 entries for the default detector, within 1e-7 relative of the bisection),
+   whose row coordinate is folded into the per-bin frequencies (:func:`_speed_index`):
+   one ``Cast`` and two ``Gather`` nodes. An unrolled bisection or Newton iteration is
+   exact too but costs ~8 graph nodes per step.
 
 A window holding NaN / inf makes every DFT bin NaN and a constant window every bin 0:
-no bin is then a strict local maximum and ``f_d = 0 / 0 = NaN``, the batch estimator's
-NaN. Where the estimator gives NaN (also: no spectral peak, a frequency at or above
-saturation) the graph scores :data:`~slipkit.export.detectors.NO_SCORE`, the lowest
-float32, read back as NaN by :func:`graph_speeds`. Known differences from the batch
-estimator: ``find_peaks`` reports the middle of a flat-topped peak where the graph
-needs a strict maximum (equal magnitudes in neighbouring bins do not occur in noisy
-signals), and a float64 recording that varies by less than float32 resolution is
-constant for the graph (NaN) but not always for the batch form.
+no bin is then a strict local maximum, eq. 6-7's sum and count are 0, and the graph
+scores :data:`~slipkit.export.detectors.NO_SCORE` (the batch estimator's NaN; also
+for no spectral peak and a frequency at or above saturation; read back as NaN by
+:func:`graph_speeds`). Known differences from the batch estimator: ``find_peaks``
+reports the middle of a flat-topped peak where the graph needs a strict maximum (equal
+magnitudes in neighbouring bins do not occur in noisy signals), a float64 recording
+that varies by less than float32 resolution is constant for the graph (NaN) but not
+always for the batch form, and with the ``f_max`` range reaching saturation a
+frequency within 1e-9 relative below it has no score (the table's last row).
+
+Cost (issue 16; figures in docs/deploy.md, ``benchmarks/bench_deploy.py --only
+sliptack``): at batch 1 a small node costs its dispatch and a large one its
+arithmetic; the per-``f_max`` ``TopK`` over ``(n_fmax, c)`` was the largest node
+(and grows with the number of peaks); the shipped detector config's graph has 75
+nodes (84 before).
 
 Decision. A speed has no slip class; :class:`SpeedSlipDetector` wraps a fitted
 estimator with a speed threshold (mm/s): slip (``1``) where ``speed >= threshold``,
@@ -173,16 +186,9 @@ def _spectrum(
 ) -> str:
     """Nodes from the windows ``x`` (float64, ``(b, W)`` or, ``rank`` 3, ``(b, W, 1)``)
     to the power spectrum ``(b, 1, N1 K2)`` in ``dft_dtype``, bin ``k1 + N1 k2`` at
-    ``k1 K2 + k2`` (13 nodes).
-
-    The detrended, Hamming-weighted window is a fixed linear combination of four
-    entries of the exclusive cumulative sum ``cs`` of the edge-padded ``xc = x - x[0]``:
-    ``h (cs[t + l + 1] - cs[t + l]) - (h / s) (cs[t + s] - cs[t])`` (the sample, then
-    the moving average; ``l = s // 2``). One ``Gather`` takes the four rows already in
-    the DFT's ``(N1, N2)`` grid (zero padding: index 0 with weight 0), one ``Mul`` and
-    one ``ReduceSum`` combine them: six nodes fewer than slicing, subtracting,
-    dividing, weighting, padding and reshaping. The cumulative sums are float64 and
-    exact for float32 samples of one scale, so the differences are too.
+    ``k1 K2 + k2`` (steps 1-2 of the module docstring; a ``(b, W, 1)`` input needs no
+    reshape to ``(b, W)``, and the product's layout gives the power in one
+    ``ReduceSumSquare`` without a reshape after it).
     """
     w = int(est.window)
     nfft = w * int(est.pad_factor)
@@ -275,29 +281,6 @@ def _peak_frequency(
     return g.op("Where", g.op("Greater", f, _d(g, 0.0)), f, _d(g, math.nan))
 
 
-def rank_weights(n_peaks: int, k: int) -> tuple[FloatArray, FloatArray]:
-    """Eq. 6-7's weights of the ``k`` largest peaks: increments ``d`` and offsets ``beta``.
-
-    With ``L`` peaks (``L <= k <= n_peaks``) sorted largest first, eq. 6's "mean over
-    ``j = 1..n_peaks`` of the top-``j`` means" (the mean of all ``L`` for ``j > L``) is
-    ``sum_r q_r w(r, L)`` with ``w(r, L) = alpha(L) - beta_r`` for ``r <= L``:
-    ``alpha(L) = (H_L + n_peaks / L - 1) / n_peaks``, ``beta_r = H_{r - 1} / n_peaks``
-    (``H`` the harmonic numbers). ``alpha(L) = sum_{r <= L} d_r`` (``d_r = alpha(r) -
-    alpha(r - 1)``, ``alpha(0) = 0``), so with the 0/1 indicator ``v`` of the ``L``
-    valid ranks (a prefix), ``alpha(L) = v @ d``: no lookup by ``L`` in the graph.
-    The weights of ``L`` peaks sum to 1.
-
-    Returns
-    -------
-    d, beta : ndarray (k,)
-    """
-    n = int(n_peaks)
-    r = np.arange(1, int(k) + 1, dtype=np.float64)
-    harm = np.concatenate([[0.0], np.cumsum(1.0 / r)])  # H_0 .. H_k
-    alpha = np.concatenate([[0.0], (harm[1:] + n / r - 1.0) / n])
-    return np.diff(alpha), harm[:-1] / n
-
-
 def _peak_value(
     g: GraphBuilder,
     power: str,
@@ -317,7 +300,12 @@ def _peak_value(
     folded into the per-bin frequencies: eq. 6-7's weights of an ``f_max`` with a peak
     sum to 1, so the weighted mean of ``scale q + shift`` is ``scale f + shift``; an
     ``f_max`` without a peak adds 0 to the sum and to the count, and with no peak at
-    all the sum is 0 and the count clamped to 1.
+    all the sum is 0 (the count is clamped to 1 x n_peaks).
+
+    Cost (issue 16): the per-``f_max`` ``TopK`` over ``(n_fmax, c)`` was the largest
+    node of the graph (~15 us of ~75 at batch 1, more on spectra with many peaks); the
+    peaks are sorted once now, and the ranks per ``f_max`` are one ``CumSum`` over
+    ``(K, n_sets)``, ``K = (c + 1) // 2``, with the weights of :func:`peak_ranks`.
     """
     rate = float(est.rate_hz)
     nfft = int(est.window) * int(est.pad_factor)
@@ -403,16 +391,13 @@ def _peak_value(
             g.const(rel.astype(np.float32) - big * np.eye(c, dtype=np.float32)),
         )
         peak = g.op("Less", hits, g.const(0.5 - big, np.float32), stem="fundamental")
-    # a counted peak's power, -1 for other bins; per f_max, -inf above it (one
-    # broadcast Add to (b, n_fmax, c)), then the top k per f_max (ties: the lower bin,
-    # as the batch sort)
+    # eq. 6-7 without a TopK per f_max: the counted peaks sorted once by power (a
+    # counted peak's power, -1 for other bins; at most (c + 1) // 2 strict maxima;
+    # ties: the lower bin first, as the batch sort), then per f_max their ranks among
+    # the peaks at or below it by one CumSum (peak_ranks)
     score = g.op("Where", peak, mid, g.const(-1.0, dt))
-    below = freqs[1 : c + 1][None, :] <= fmax[:, None]  # (n_fmax, c)
-    ranked = g.op(
-        "Add", score, g.const(np.where(below, 0.0, -np.inf), dt), stem="ranked"
-    )
-    k = min(int(est.n_peaks), c)
-    top, idx = _topk(g, ranked, k)  # (b, n_fmax, k), largest first
+    n_sorted = (c + 1) // 2
+    _, order = _topk(g, score, n_sorted)  # (b, 1, K), largest first
     # the per-bin value q (scale x frequency + shift, > 0), 0 for bins not counted
     bin_hz = float(freqs[1] - freqs[0])
     q0 = scale * np.arange(1, c + 1, dtype=np.float64) * bin_hz + shift
@@ -436,43 +421,88 @@ def _peak_value(
         q = g.op("Add", off, _d(g, q0), stem="peak_value")  # (b, 1, c)
     else:
         q = _d(g, q0)
-    # per f_max and rank, the value of the ranked bin (0 for bins not counted): one
-    # GatherElements on the (b, 1, c) values with the indices as (b, 1, n_fmax k)
-    # (a broadcast of the values to (b, n_fmax, c) costs more than the two reshapes)
+    # the value of each sorted peak (0: not a counted peak), and 1 where it is one
     qm = g.op("Where", peak, q, _d(g, 0.0))
-    n_fmax = len(fmax)
-    flat = g.op("Reshape", idx, g.const([-1, 1, n_fmax * k], i64))
-    qtop = g.op(
-        "Reshape",
-        g.op("GatherElements", qm, flat, axis=2),
-        g.const([-1, n_fmax, k], i64),
-        stem="qtop",
-    )  # (b, n_fmax, k)
-    if int(below.sum(axis=1).min()) < k:
-        # an f_max with fewer than k bins below it: its -inf entries are bins above it
-        qtop = g.op(
-            "Where", g.op("GreaterOrEqual", top, g.const(0.0, dt)), qtop, _d(g, 0.0)
-        )
-    # eq. 6-7 (rank_weights): per f_max, sum_r q_r (alpha(L) - beta_r) =
-    # (v @ d) (q @ 1) - q @ beta with v = sign(q) the valid ranks; P = v @ [d, e1]
-    # (alpha, "has a peak"), Q = q @ [1, -beta]: the sum over f_max of P * Q is the
-    # numerator (-beta's column times "has a peak" is itself), of P's second column
-    # the count
-    d, beta = rank_weights(int(est.n_peaks), k)
-    e1 = np.zeros(k)
-    e1[0] = 1.0
-    valid = g.op("Sign", qtop, stem="valid")
-    pm = g.op("MatMul", valid, _d(g, np.stack([d, e1], axis=1)))  # (b, n_fmax, 2)
-    qm2 = g.op("MatMul", qtop, _d(g, np.stack([np.ones(k), -beta], axis=1)))
-    num = _reduce(g, "ReduceSum", g.op("Mul", pm, qm2), (1, 2), 0)
-    count = g.op(
+    qs = g.op("GatherElements", qm, order, axis=2, stem="sorted_value")  # (b, 1, K)
+    left = g.op("Concat", qs, g.op("Sign", qs), axis=1)  # (b, 2, K)
+    n_peaks = int(est.n_peaks)
+    cols, mult, ((alpha_n, has_n)) = peak_ranks(freqs[1 : c + 1], fmax, n_peaks)
+    elig = g.op(
         "Gather",
-        _reduce(g, "ReduceSum", pm, (1,), 0),
+        _d(g, cols),
+        g.op("Reshape", order, g.const([-1, n_sorted], i64)),
+        axis=0,
+        stem="eligible",
+    )  # (b, K, n_sets): 1 where the i-th largest is at or below the f_max
+    rank = g.op("CumSum", elig, g.const(1, i64), stem="rank")
+    # the top n_peaks of each f_max: max(0, min(eligible, n_peaks + 1 - rank)) (ranks
+    # are whole numbers; Min and Relu cost less than a Where here)
+    in_top = g.op("Relu", g.op("Min", elig, g.op("Sub", _d(g, n_peaks + 1.0), rank)))
+    # H(rank - 1) of each eligible peak: the exclusive running sum of 1 / rank (rank
+    # is 0 only before the first eligible peak)
+    harm = g.op(
+        "CumSum",
+        g.op("Div", elig, g.op("Max", rank, _d(g, 1.0))),
         g.const(1, i64),
-        axis=1,
-        stem="n_fmax",
+        exclusive=1,
     )
-    return g.op("Div", num, g.op("Max", count, _d(g, 1.0)), stem="f_value")
+    tl = g.op("MatMul", left, in_top)  # (b, 2, n_sets): sum of the top values, L
+    hq = g.op("MatMul", qs, g.op("Mul", in_top, harm))  # (b, 1, n_sets)
+    total, count = g._fresh("total"), g._fresh("count")
+    split = {"num_outputs": 2} if g.opset >= 18 else {}
+    g.nodes.append(helper.make_node("Split", [tl], [total, count], axis=1, **split))
+    li = g.op("Cast", count, to=int(onnx.TensorProto.INT64))
+    # n_peaks x eq. 6's mean per f_max: (H_L + n / L - 1) x total - sum H(r - 1) q_r
+    per = g.op(
+        "Sub", g.op("Mul", g.op("Gather", _d(g, alpha_n), li, axis=0), total), hq
+    )
+    has = g.op("Gather", _d(g, has_n), li, axis=0)  # n_peaks where L >= 1
+    if np.any(mult > 1):  # f_max values with the same bins below them: one column
+        per = g.op("Mul", per, _d(g, mult))
+        has = g.op("Mul", has, _d(g, mult))
+    num = _reduce(g, "ReduceSum", per, (1, 2), 0)
+    den = _reduce(g, "ReduceSum", has, (1, 2), 0)
+    return g.op("Div", num, g.op("Max", den, _d(g, float(n_peaks))), stem="f_value")
+
+
+def peak_ranks(
+    bin_hz: ArrayLike, fmax: ArrayLike, n_peaks: int
+) -> tuple[FloatArray, FloatArray, tuple[FloatArray, FloatArray]]:
+    """Constants of the graph's eq. 6-7: eligibility, multiplicities, weight tables.
+
+    Eq. 6 per ``f_max``: with the ``L = min(count, n_peaks)`` largest peaks at or below
+    it, ``q_1 >= ... >= q_L`` by power, "the mean over ``j = 1..n_peaks`` of the top-``j``
+    means" (the mean of all ``L`` for ``j > L``) is ``sum_r q_r (alpha(L) - beta(r))``
+    with ``n alpha(L) = H_L + n / L - 1`` and ``n beta(r) = H_{r - 1}`` (``H`` the
+    harmonic numbers, ``n = n_peaks``; the weights sum to 1). So the graph needs per
+    ``f_max`` only the sum of the top values, the sum of ``H_{r - 1} q_r`` (a running
+    sum of ``1 / rank``) and ``L``, and per-``f_max`` lookups by ``L``.
+
+    Parameters
+    ----------
+    bin_hz : array_like (c,)
+        Frequencies (Hz) of the candidate bins 1..c.
+    fmax : array_like (n_fmax,)
+        Eq. 7's ``f_max`` values (Hz).
+    n_peaks : int
+
+    Returns
+    -------
+    cols : ndarray (c, n_sets)
+        1 where a bin is at or below an ``f_max``, one column per distinct set of bins
+        (``f_max`` values between the same two bins share one).
+    mult : ndarray (n_sets,)
+        How many ``f_max`` values each column stands for.
+    (alpha_n, has_n) : ndarrays (n_peaks + 1,)
+        ``n alpha(L)`` and ``n [L >= 1]`` for ``L = 0 .. n_peaks`` (0 at ``L = 0``).
+    """
+    below = np.asarray(bin_hz, dtype=np.float64)[:, None] <= np.asarray(fmax)[None, :]
+    cols, mult = np.unique(below, axis=1, return_counts=True)
+    n = int(n_peaks)
+    ell = np.arange(1, n + 1, dtype=np.float64)
+    alpha_n = np.concatenate([[0.0], np.cumsum(1.0 / ell) + n / ell - 1.0])
+    has_n = np.concatenate([[0.0], np.full(n, float(n))])
+    return cols.astype(np.float64), mult.astype(np.float64), (alpha_n, has_n)
 
 
 def _topk(g: GraphBuilder, values: str, k: int) -> tuple[str, str]:
