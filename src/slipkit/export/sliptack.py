@@ -982,6 +982,7 @@ __all__ = [
     "export_stick_slip_speed",
     "graph_speeds",
     "incremental_problem",
+    "peak_ranks",
     "sliding_spectrum_step",
     "speed_table",
 ]
