@@ -424,7 +424,7 @@ def _peak_value(
     # the value of each sorted peak (0: not a counted peak), and 1 where it is one
     qm = g.op("Where", peak, q, _d(g, 0.0))
     qs = g.op("GatherElements", qm, order, axis=2, stem="sorted_value")  # (b, 1, K)
-    left = g.op("Concat", qs, g.op("Sign", qs), axis=1)  # (b, 2, K)
+    valid = g.op("Sign", qs)  # (b, 1, K)
     n_peaks = int(est.n_peaks)
     cols, mult, ((alpha_n, has_n)) = peak_ranks(freqs[1 : c + 1], fmax, n_peaks)
     elig = g.op(
@@ -446,11 +446,11 @@ def _peak_value(
         g.const(1, i64),
         exclusive=1,
     )
-    tl = g.op("MatMul", left, in_top)  # (b, 2, n_sets): sum of the top values, L
-    hq = g.op("MatMul", qs, g.op("Mul", in_top, harm))  # (b, 1, n_sets)
-    total, count = g._fresh("total"), g._fresh("count")
-    split = {"num_outputs": 2} if g.opset >= 18 else {}
-    g.nodes.append(helper.make_node("Split", [tl], [total, count], axis=1, **split))
+    # per f_max (b, 1, n_sets): the sum of the top values, their number L, and the
+    # sum of H(rank - 1) x value
+    total = g.op("MatMul", qs, in_top, stem="total")
+    count = g.op("MatMul", valid, in_top, stem="count")
+    hq = g.op("MatMul", qs, g.op("Mul", in_top, harm))
     li = g.op("Cast", count, to=int(onnx.TensorProto.INT64))
     # n_peaks x eq. 6's mean per f_max: (H_L + n / L - 1) x total - sum H(r - 1) q_r
     per = g.op(
@@ -585,9 +585,11 @@ def _speed_index(est: StickSlipSpeed) -> tuple[float, float, dict[str, Any]]:
     top = f_max_values(tuple(est.f_max_range), float(est.f_max_step))[-1]
     if est.interpolate:
         top = top + 0.5 * float(est.rate_hz) / (int(est.window) * int(est.pad_factor))
-    if float(est.saturation_hz_) <= top:
+    clip = float(est.saturation_hz_) <= top
+    if clip:
         a[-1], b[-1] = NO_SCORE, 0.0
-    note = {"a": a, "b": b, "n": n, "err": err}
+    # else u <= n + 1 up to rounding (f <= the largest f_max + half a bin): no Clip
+    note = {"a": a, "b": b, "n": n, "err": err, "clip": clip}
     return 1.0 / df, 2.0 - f0 / df, note
 
 
@@ -611,11 +613,9 @@ def _speed(
         v = g.op("Clip", v, _d(g, NO_SCORE), _d(g, _F32_MAX), stem="speed")
         return v, {"speed": "closed form"}
     n = int(table["n"])
-    row = g.op(
-        "Cast",
-        g.op("Clip", u, _d(g, 0.0), _d(g, n + 1.0)),
-        to=int(onnx.TensorProto.INT64),
-    )
+    if table["clip"]:  # frequencies above the table's last row (saturation)
+        u = g.op("Clip", u, _d(g, 0.0), _d(g, n + 1.0))
+    row = g.op("Cast", u, to=int(onnx.TensorProto.INT64))
     v = g.op(
         "Add",
         g.op("Gather", _d(g, table["a"]), row, axis=0),
