@@ -61,7 +61,7 @@ frequency within 1e-9 relative below it has no score (the table's last row).
 Cost (issue 16; figures in docs/deploy.md, ``benchmarks/bench_deploy.py --only
 sliptack``): at batch 1 a small node costs its dispatch and a large one its
 arithmetic; the per-``f_max`` ``TopK`` over ``(n_fmax, c)`` was the largest node
-(and grows with the number of peaks); the shipped detector config's graph has 75
+(and grows with the number of peaks); the shipped detector config's graph has 73
 nodes (84 before).
 
 Decision. A speed has no slip class; :class:`SpeedSlipDetector` wraps a fitted
