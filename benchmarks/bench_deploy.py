@@ -198,13 +198,17 @@ def graph_flops(model_bytes: bytes, fallback: int | None) -> int:
     return flops
 
 
-def identity_floor(input_shape: list[int], frames: int) -> list[int]:
-    """onnxruntime's per-call floor: an Identity graph on this input, IOBinding, one thread."""
+def identity_floor(
+    input_shape: list[int], frames: int, dtype: str = "float32"
+) -> list[int]:
+    """onnxruntime's per-call floor: an Identity graph on this input (shape and dtype),
+    IOBinding, one thread."""
     import onnxruntime as ort
     from onnx import TensorProto, helper
 
-    inp = helper.make_tensor_value_info("x", TensorProto.FLOAT, input_shape)
-    out = helper.make_tensor_value_info("y", TensorProto.FLOAT, input_shape)
+    elem = TensorProto.DOUBLE if dtype == "float64" else TensorProto.FLOAT
+    inp = helper.make_tensor_value_info("x", elem, input_shape)
+    out = helper.make_tensor_value_info("y", elem, input_shape)
     g = helper.make_graph(
         [helper.make_node("Identity", ["x"], ["y"])], "id", [inp], [out]
     )
@@ -216,8 +220,8 @@ def identity_floor(input_shape: list[int], frames: int) -> list[int]:
     sess = ort.InferenceSession(
         model.SerializeToString(), opts, providers=["CPUExecutionProvider"]
     )
-    x = np.zeros(input_shape, np.float32)
-    y = np.zeros(input_shape, np.float32)
+    x = np.zeros(input_shape, dtype)
+    y = np.zeros(input_shape, dtype)
     b = sess.io_binding()
     b.bind_ortvalue_input("x", ort.OrtValue.ortvalue_from_numpy(x))
     b.bind_ortvalue_output("y", ort.OrtValue.ortvalue_from_numpy(y))
@@ -243,10 +247,12 @@ def numpy_svm_floor(model: Any, feats: np.ndarray) -> list[int]:
 
 
 def _bound(sess: Any, in_name: str, out_name: str, shape: list[int]) -> Any:
-    """A function ``x -> None`` that writes one input and runs the session through IOBinding."""
+    """A function ``x -> None`` that writes one input and runs the session through
+    IOBinding (the input buffer in the graph's input dtype, float32 or float64)."""
     import onnxruntime as ort
 
-    xb = np.zeros(shape, np.float32)
+    dtype = np.float64 if sess.get_inputs()[0].type == "tensor(double)" else np.float32
+    xb = np.zeros(shape, dtype)
     ob = np.zeros_like(np.asarray(sess.run([out_name], {in_name: xb})[0]))
     binding = sess.io_binding()
     binding.bind_ortvalue_input(in_name, ort.OrtValue.ortvalue_from_numpy(xb))
@@ -401,16 +407,18 @@ def main() -> None:
             in_shape,
             skip_nonfinite=True,
         )
-        x32 = inputs.astype(np.float32)
-        loop = StreamLoop(bundle)
         (inp,) = m.inputs
+        # the graph's own input dtype (float32, or float64 for the FSR and LWR graphs),
+        # so the bare call's input write is a plain copy, as the loop's
+        x32 = inputs.astype(inp.dtype)
+        loop = StreamLoop(bundle)
         bare = _bound(bundle.session, inp.name, m.decision.output, [1, *in_shape])
         detector = hasattr(graph, "first_decision")
         if detector:
             # native: the batch detector's decision_function on one window (its
             # last sample is the decision), the per-decision Python cost.
-            def native(x: np.ndarray, est: Any = model) -> None:
-                est.decision_function(x)
+            def native(x: np.ndarray, est: Any = model, w: int = graph.window) -> None:
+                est.decision_function(x.reshape(w, -1))  # (window, channels)
 
             feats = inputs[:1]
         else:
@@ -443,7 +451,14 @@ def main() -> None:
                 bundle.session_spec.options(),
                 providers=["CPUExecutionProvider"],
             )
-            old_bare = _bound(old_sess, inp.name, m.decision.output, [1, *in_shape])
+            # the earlier graph's own input dtype and shape (the FSR graph read a
+            # float32 (batch, 10, 1) window before issue 16, float64 (batch, 10) now)
+            old_in = old_sess.get_inputs()[0]
+            old_shape = [1, *(int(d) for d in old_in.shape[1:])]
+            old_bare = _bound(old_sess, inp.name, m.decision.output, old_shape)
+            x_old = inputs.astype(
+                np.float64 if old_in.type == "tensor(double)" else np.float32
+            ).reshape(len(inputs), *old_shape[1:])
             part["before"] = []
         old_loop = None
         if old_loop_cls is not None:
@@ -475,7 +490,7 @@ def main() -> None:
             stats["loop"].append(_pct(loop.result().latency_ns))
             stats["bare"].append(_pct(_time_calls(bare, x32)))
             if old_bare is not None:
-                part["before"].append(_pct(_time_calls(old_bare, x32)))
+                part["before"].append(_pct(_time_calls(old_bare, x_old)))
             if old_loop is not None:
                 old_loop.reset()
                 for values, ts in zip(frames, times.tolist(), strict=True):
@@ -484,7 +499,9 @@ def main() -> None:
             stats["native"].append(_pct(_time_calls(native, inputs[:300])))
             if module is not None:
                 stats["torch"].append(_pct(_time_calls(eager, x32[:1000])))
-            stats["identity"].append(_pct(identity_floor([1, *in_shape], 1000)))
+            stats["identity"].append(
+                _pct(identity_floor([1, *in_shape], 1000, str(inp.dtype)))
+            )
             if svm:
                 stats["numpy"].append(_pct(numpy_svm_floor(model, feats)))
                 part["bare"].append(

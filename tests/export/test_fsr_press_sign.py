@@ -317,11 +317,11 @@ def _bundle(graph: Any, path: Path) -> Path:
         "inputs": [
             {
                 "name": graph.input_name,
-                "dtype": "float32",
-                "shape": [1, graph.window, 1],
+                "dtype": graph.input_dtype,  # float64: the graph reads the window as is
+                "shape": [1, *graph.input_shape[1:]],
             }
         ],
-        "outputs": [{"name": "score", "dtype": "float32"}],
+        "outputs": [{"name": "score", "dtype": "float64"}],
         "decision": decision,
         "threshold": graph.threshold,
         "debounce": {"k": 1},

@@ -38,34 +38,46 @@ def _force_data(n: int = 300, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     return X, Y
 
 
-def test_fsr_graph_is_one_matmul_and_a_gate() -> None:
-    """The two-block FSR graph has 8 nodes (one MatMul for both block statistics)."""
+def test_fsr_graph_is_one_gemm_and_a_minimum() -> None:
+    """The two-block FSR graph has 4 nodes on a float64 (batch, 10) window: one Gemm for the gate and the derivative, the gate as a minimum."""
     det = FSRTouchSlip(threshold=8.0, polarity="falling").fit(
         np.full((20, 1), 4.5), np.zeros(20, int)
     )
     graph = export_fsr_touch_slip(det, rest=4.5)
-    expected = [
-        "Cast",
-        "MatMul",
-        "Split",
-        "Greater",
-        "Where",
-        "Reshape",
-        "Clip",
-        "Cast",
-    ]
-    assert expected == _ops(graph)
+    expected = (["Gemm", "Add", "ReduceMin", "Clip"], ("batch", 10), "float64")
+    assert expected == (_ops(graph), graph.input_shape, graph.input_dtype)
+
+
+@pytest.mark.parametrize("gap", [-(2.0**-40), 0.0, 2.0**-40, 2.0**-10])
+def test_fsr_graph_gate_is_strict_at_and_around_the_press_threshold(
+    gap: float,
+) -> None:
+    """A press exactly at delta is untouched (NO_SCORE, the detector's -inf: its gate is strict); 2**-40 V above it the score is the detector's derivative."""
+    from slipkit.export.detectors import graph_scores
+
+    # block 4 and binary voltages: the graph's and numpy's block means are exact, so
+    # gap 0 is an exact tie in both
+    det = FSRTouchSlip(threshold=8.0, polarity="falling", block=4, delta=0.25).fit(
+        np.full((20, 1), 4.5), np.zeros(20, int)
+    )
+    graph = export_fsr_touch_slip(det, rest=4.5)
+    window = np.r_[np.full(4, 4.375), np.full(4, 4.5 - 0.25 - gap)]
+    # 12 rest samples: the window is the recording's blocks 3 and 4 (blocks start at 0)
+    ref = det.decision_function(np.r_[np.full(12, 4.5), window][:, None])[-1]
+    out = onnx_session(graph).run(None, {graph.input_name: window[None]})[0]
+    assert (gap > 0, ref) == (bool(np.isfinite(ref)), graph_scores(out)[0])
 
 
 def test_force_graphs_have_few_nodes_and_reproduce_predict() -> None:
-    """Weighted normals: one Gemm; LWR: 8 nodes; both within 1e-4 N of predict."""
+    """Weighted normals: one float32 Gemm; LWR: 7 float64 nodes; both within 1e-4 N of predict."""
     X, Y = _force_data()
     normals = WeightedNormalsRegressor().fit(X[:200], Y[:200])
     lwr = LocalLinearRegressor(n_fields=7, random_state=0).fit(X[:200], Y[:200])
     g_n, g_l = export(normals), export(lwr)
     assert ["Gemm"] == _ops(g_n)
-    expected = ["Cast", "Gemm", "Softmax", "Gemm", "MatMul", "Mul", "MatMul", "Cast"]
-    assert expected == _ops(g_l)
+    expected = ["Gemm", "Softmax", "Gemm", "Reshape", "Reshape", "MatMul", "Reshape"]
+    assert (expected, "float64") == (_ops(g_l), g_l.input_dtype)
+    assert "float32" == g_n.input_dtype
     for est, graph in ((normals, g_n), (lwr, g_l)):
         report = check_parity(est, graph, X[200:])
         assert (True, True) == (report["passed"], report["max_abs_diff"] <= 1e-4)
@@ -189,13 +201,13 @@ def test_one_frame_loop_flags_every_nonfinite_frame_and_scores_the_rest(
 
 
 def test_fsr_graph_scores_match_on_a_batch_and_one_window_at_a_time() -> None:
-    """The FSR graph gives the same float32 score for a window alone as inside a batch."""
+    """The FSR graph gives the same score for a window alone as inside a batch."""
     det = FSRTouchSlip(threshold=8.0, polarity="falling").fit(
         np.full((20, 1), 4.5), np.zeros(20, int)
     )
     graph = export_fsr_touch_slip(det, rest=4.5)
     sess = onnx_session(graph)
-    wins = np.random.default_rng(3).uniform(3.0, 4.6, (50, 10, 1)).astype(np.float32)
+    wins = np.random.default_rng(3).uniform(3.0, 4.6, (50, 10))
     batch = sess.run(None, {graph.input_name: wins})[0]
     one = np.concatenate([sess.run(None, {graph.input_name: x[None]})[0] for x in wins])
     np.testing.assert_array_equal(batch, one)

@@ -294,9 +294,15 @@ def export_main(cfg: DictConfig) -> Path:
         "frame": dep.frame,
         "preprocessing": dep.preprocessing,
         "inputs": [
-            {"name": graph.input_name, "dtype": "float32", "shape": [1, *input_shape]}
+            {
+                "name": graph.input_name,
+                "dtype": graph.input_dtype,
+                "shape": [1, *input_shape],
+            }
         ],
-        "outputs": [{"name": graph.score_output, "dtype": "float32"}],
+        # the output's dtype (float32 or float64) and shape: write_bundle reads them
+        # from the graph
+        "outputs": [{"name": graph.score_output}],
         "decision": decision,
         "threshold": threshold,
         "debounce": {"k": int(dep.debounce_k)},

@@ -9,11 +9,15 @@ every :class:`~slipkit.baselines.base.StreamDetector`); :class:`DetectorGraph`
 defaults ``strict`` to False, where the registry's
 :class:`~slipkit.export.registry.ExportedGraph` defaults to True (scikit-learn's
 ``predict``). Inside, every graph casts the window to float64, so
-the only rounding that differs from the batch detector is the float32 input.
+the only rounding that differs from the batch detector is the float32 input. The FSR
+graphs instead read the float64 window itself, shape ``(batch, W)`` (one channel), and
+return a float64 score: no cast nodes, no float32 rounding (issue 16).
 
 * :class:`~slipkit.baselines.fsr.FSRTouchSlip` -- ``W = 2 block`` (10): the two
   block means, their backward difference over the cycle time, one sign, the touch
-  gate. Decision instants are block ends: ``hop = block`` (5). The batch detector
+  gate (the plain two-block graph is four nodes: ``Gemm``, ``Add``, ``ReduceMin``,
+  ``Clip``; :func:`_fsr_gated`). Decision instants are block ends: ``hop = block``
+  (5). The batch detector
   averages each recording's first 10 samples into its rest level; for voltage input
   the runtime op ``press_sign`` does the same per stream (:func:`fsr_press_sign_step`),
   with the fitted polarity's sign, or, for ``polarity_ == "per_recording"`` (training
@@ -41,7 +45,8 @@ graph output differs from the batch one by at most ``T(L) D`` where ``D`` is the
 largest deviation of an earlier sample from the window's first one. ``L`` is the
 smallest length with ``T(L) <= tail_tol``.
 
-Parity (:func:`check_detector_parity`) compares the graph on float32 windows with
+Parity (:func:`check_detector_parity`) compares the graph on the windows the runtime
+feeds (float32, float64 for FSR) with
 the batch detector on the recordings, at the instants the runtime would call it;
 ``python -m slipkit.export.detectors`` prints it (and the time per call) for every
 detector on simulated recordings.
@@ -51,7 +56,8 @@ data) a graph scores :data:`NO_SCORE`, the lowest float32 (below any threshold),
 because the runtime loop skips non-finite scores instead of deciding "no slip";
 :func:`graph_scores` reads it back as ``-inf``.
 
-NaN policy (graphs): a window holding a NaN or inf scores ``NO_SCORE`` (never slip),
+NaN policy (graphs): a window holding a NaN or inf scores ``NO_SCORE`` (never slip;
+the two-block FSR graph with the gate: NaN or ``NO_SCORE``, never a finite score),
 except where the batch detector provably ignores the sample (the middle samples of
 the force-derivative window). FSR and force derivative then agree with their batch
 detectors exactly; the pressure detector's batch form instead holds the last finite
@@ -396,7 +402,11 @@ def export_fsr_touch_slip(
     rest_sig = v_rest if coeffs is None else float(np.polyval(coeffs, v_rest))
 
     g = GraphBuilder("fsr_touch_slip", opset)
-    inp, v = _prologue(g, w, 1)  # (batch, w, 1): each branch reshapes as it needs
+    # float64 in and out: the runtime feeds the float64 window the batch detector
+    # reads (no cast node, no float32 rounding), and reads a float64 score (no clip to
+    # the float32 range, no cast back). One channel: the window is (batch, w).
+    inp = helper.make_tensor_value_info(WINDOW_INPUT, DOUBLE, ["batch", w])
+    v = WINDOW_INPUT
     if coeffs is not None:
         # eq. 6 by Horner's rule, as numpy.polyval evaluates it
         acc = g.op("Mul", v, g.const(coeffs[0], np.float64))
@@ -405,49 +415,14 @@ def export_fsr_touch_slip(
         v = g.op("Add", acc, g.const(coeffs[-1], np.float64), stem="force")
     if confirm:
         score64 = _fsr_confirmed(g, v, detector, n_blocks, rest_sig, delta, sign)
-        return _fsr_graph_out(
-            g,
-            inp,
-            score64,
-            detector,
-            w,
-            v_rest,
-            rest_sig,
-            delta,
-            gate,
-            polarity,
-            sign,
-            stream_rest=stream_rest,
-        )
-    # One MatMul gives both block statistics (few nodes: node dispatch, not arithmetic,
-    # dominates a batch-1 call): row 0 the signed derivative of the two block means,
-    # row 1 ``-sign * mean(last block)``, whose zero weights on the previous block
-    # still turn a NaN / inf anywhere in the window into NaN (0 * NaN = 0 * inf = NaN),
-    # so the gate ``press > delta`` (``sign (rest - last) > delta``) is also the
-    # finiteness test.
-    rows = np.zeros((2, w))  # (2, w) @ (batch, w, 1) -> (batch, 2, 1)
-    rows[0, :b] = -sign * per_s / b
-    rows[0, b:] = sign * per_s / b
-    rows[1, b:] = -sign / b
-    stats = g.op("MatMul", g.const(rows, np.float64), v, stem="block_stats")
-    deriv, press = g._fresh("deriv"), g._fresh("press")
-    split = {"num_outputs": 2} if g.opset >= 18 else {}
-    g.nodes.append(helper.make_node("Split", [stats], [deriv, press], axis=1, **split))
-    if gate:
-        ok = g.op(
-            "Greater",
-            press,
-            g.const(delta - sign * rest_sig, np.float64),
-            stem="touched",
-        )
+    elif gate:
+        score64 = _fsr_gated(g, v, b, w, sign * per_s, sign, delta - sign * rest_sig)
     else:
+        deriv = g.op(
+            "MatMul", v, g.const(_fsr_deriv_row(b, w, sign * per_s), np.float64)
+        )  # (batch,)
         ok = g.op("Not", _not_finite(g, deriv), stem="finite")
-    score64 = g.op(
-        "Reshape",
-        g.op("Where", ok, deriv, g.const(NO_SCORE, np.float64)),
-        g.const([-1], np.int64),
-        stem="score64",
-    )
+        score64 = g.op("Where", ok, deriv, g.const(NO_SCORE, np.float64))
     return _fsr_graph_out(
         g,
         inp,
@@ -462,6 +437,70 @@ def export_fsr_touch_slip(
         sign,
         stream_rest=stream_rest,
     )
+
+
+#: The gated FSR graph's gate column is ``_GATE_SCALE * (press - delta')``: a power of
+#: two, so the scaling is exact (float64 rounding commutes with it), and large enough
+#: that any press above the gate by 2**-400 or more (every press of a voltage or force
+#: above 1e-100, as the gate's own spacing is) lands far above every score.
+_GATE_SCALE = 2.0**600
+#: Subtracted from the gate column: a press at or below the gate (column <= 0) lands
+#: below NO_SCORE (-3.4e38 > -2**128), a press above it (column >= 2**200) stays above
+#: every block derivative below 2**199.
+_GATE_SHIFT = 2.0**128
+
+
+def _fsr_deriv_row(b: int, w: int, scale: float) -> NDArray[np.float64]:
+    """``(w,)`` weights of ``scale * (mean(last block) - mean(previous block))``."""
+    row = np.zeros(w)
+    row[:b] = -scale / b
+    row[b:] = scale / b
+    return row
+
+
+def _fsr_gated(
+    g: GraphBuilder,
+    v: str,
+    b: int,
+    w: int,
+    deriv_scale: float,
+    sign: float,
+    gate: float,
+) -> str:
+    """The two-block score with the touch gate in four nodes: ``(batch,)`` float64.
+
+    ``deriv = deriv_scale (mean(last) - mean(previous))``; touched where ``press =
+    -sign mean(last) > gate``. Node dispatch, not arithmetic, is a batch-1 call's
+    cost, and ``Where`` and ``Split`` are the dearest small kernels in onnxruntime
+    (~0.6-0.7 us each against ~0.1 us for an elementwise op), so the gate is a
+    minimum instead: one ``Gemm`` gives ``[u, deriv]`` with ``u = K (press - gate)``
+    (``K`` = :data:`_GATE_SCALE`, exact), ``Add`` shifts ``u`` down by
+    :data:`_GATE_SHIFT`, ``ReduceMin`` over the two columns is ``deriv`` when touched
+    (``u >= 2**200 - 2**128``) and below :data:`NO_SCORE` when not (``u <=
+    -2**128``; ``press == gate`` is untouched, as in the batch detector), and
+    ``Clip`` lifts the latter to exactly ``NO_SCORE``. The zero gate weights on the
+    previous block turn a NaN or inf anywhere in the window into NaN in ``u`` (0 *
+    NaN = 0 * inf = NaN), and ``ReduceMin`` keeps a NaN in its first column: a
+    non-finite window scores NaN (or ``NO_SCORE`` where ``u`` or ``deriv`` is
+    ``-inf``), never a finite score; the runtime loop never calls the graph on one.
+    """
+    weights = np.zeros((w, 2))
+    weights[b:, 0] = -sign * _GATE_SCALE / b
+    weights[:, 1] = _fsr_deriv_row(b, w, deriv_scale)
+    bias = np.array([-_GATE_SCALE * gate, 0.0])
+    if not np.isfinite(bias).all():
+        raise ExportError(
+            f"FSR export: the touch gate {gate!r} (V or N) is not a finite number below 2**424"
+        )
+    stats = g.op("Gemm", v, g.const(weights, np.float64), g.const(bias, np.float64))
+    shifted = g.op(
+        "Add", stats, g.const([-_GATE_SHIFT, 0.0], np.float64), stem="gate_deriv"
+    )
+    if g.opset >= 18:
+        low = g.op("ReduceMin", shifted, _axes(g, 1), keepdims=0, stem="gated")
+    else:
+        low = g.op("ReduceMin", shifted, axes=[1], keepdims=0, stem="gated")
+    return g.op("Clip", low, g.const(NO_SCORE, np.float64), stem="score64")
 
 
 #: Below every finite block score: the confirmed graph's "no derivative here" (the batch
@@ -595,11 +634,14 @@ def _fsr_graph_out(
         if stream_rest
         else f"v_rest = {v_rest:g} V"
     )
-    model = _finish(
-        g,
-        inp,
-        score64,
-        f"FSRTouchSlip ({detector.input}) over {w} samples: {what} ({unit})"
+    # float64 out: the last node writes the score itself
+    last = g.nodes[-1]
+    assert list(last.output) == [score64]
+    last.output[0] = SCORE
+    model = g.build(
+        [inp],
+        [helper.make_tensor_value_info(SCORE, DOUBLE, ["batch"])],
+        doc=f"FSRTouchSlip ({detector.input}) over {w} samples: {what} ({unit})"
         + (f", NO_SCORE unless touched against {against}" if gate else ""),
     )
     import scipy
@@ -655,6 +697,7 @@ def _fsr_graph_out(
         },
         scipy=scipy.__version__,
     )
+    graph = replace(graph, input_shape=("batch", w), input_dtype="float64")
     if not stream_rest:
         return graph
     return replace(graph, preprocessing=(fsr_press_sign_step(detector),))
@@ -1074,7 +1117,7 @@ def export_torsional_slip(
 # -- parity -------------------------------------------------------------------------------
 def detector_windows(
     graph: DetectorGraph, X: ArrayLike
-) -> tuple[NDArray[np.float32], NDArray[np.int64]]:
+) -> tuple[NDArray[np.floating[Any]], NDArray[np.int64]]:
     """The windows the runtime feeds ``graph`` over ONE recording, and their last samples.
 
     Parameters
@@ -1086,33 +1129,39 @@ def detector_windows(
 
     Returns
     -------
-    windows : ndarray (n_calls, window, n_channels) float32
+    windows : ndarray (n_calls, *graph.input_shape[1:])
         Cut with :func:`numpy.lib.stride_tricks.sliding_window_view` from the
-        float32 recording (a copy).
+        recording in the graph's input dtype (``graph.input_dtype``: float32, or
+        float64 for the FSR graphs), a copy in the graph's input shape (``(window,
+        n_channels)``, or ``(window,)`` for the one-channel FSR graphs).
     instants : ndarray (n_calls,) int64
         0-based sample of each window's last sample (:meth:`DetectorGraph.instants`).
     """
-    x = np.asarray(X, dtype=np.float32)
+    dtype = np.dtype(graph.input_dtype)
+    x = np.asarray(X, dtype=dtype)
     if x.ndim == 1:
         x = x[:, None]
     inst = graph.instants(len(x))
     c = x.shape[1]
+    shape = tuple(int(s) for s in graph.input_shape[1:])
     if len(inst) == 0:
-        return np.empty((0, graph.window, c), dtype=np.float32), inst
+        return np.empty((0, *shape), dtype=dtype), inst
     view = sliding_window_view(x, (graph.window, c))[:, 0]  # row j = samples j..j+W-1
-    return np.ascontiguousarray(view[inst - (graph.window - 1)]), inst
+    out = np.ascontiguousarray(view[inst - (graph.window - 1)])
+    return out.reshape(len(inst), *shape), inst
 
 
 def _preprocessed_windows(
     graph: DetectorGraph, x: NDArray[np.float64], inst: NDArray[np.int64]
-) -> NDArray[np.float32]:
+) -> NDArray[np.floating[Any]]:
     """The graph inputs at ``inst`` after the graph's runtime ``preprocessing``.
 
     As :class:`slipkit.runtime.StreamLoop` makes them for one recording: the
     runtime's own :class:`~slipkit.runtime.preprocessing.Pipeline`, fresh, on the
     float64 window of every call from the first (``window - 1``, then every ``hop``),
-    in order, so stateful steps see what they would see live; then float32, in the
-    graph's input shape (e.g. a power spectrum for ``sliding_spectrum``).
+    in order, so stateful steps see what they would see live; then the graph's input
+    dtype (float32 or float64) and shape (e.g. a power spectrum for
+    ``sliding_spectrum``).
     """
     from slipkit.runtime.preprocessing import Pipeline
 
@@ -1121,7 +1170,7 @@ def _preprocessed_windows(
     calls = np.arange(w - 1, len(x), graph.hop)
     want = {int(i): k for k, i in enumerate(inst)}
     shape = tuple(int(v) for v in graph.input_shape[1:])
-    out = np.empty((len(inst), *shape), dtype=np.float32)
+    out = np.empty((len(inst), *shape), dtype=np.dtype(graph.input_dtype))
     for end in calls:
         y = pipe(x[end - w + 1 : end + 1])
         k = want.get(int(end))
@@ -1155,8 +1204,10 @@ def _fsr_gate_margin(
         press_i = np.full(len(inst), np.nan)
         ok = blk < len(press_b)
         press_i[ok] = press_b[blk[ok]]
-        # the graph reads sign * (v - rest) in float32: a block mean can move by half
-        # a float32 step of the largest |v - rest| (no rest gap: the rest is the same)
+        # the graph reads sign * (v - rest) in float64 and sums a block in its own
+        # order: its press can differ from numpy's mean by a few float64 steps of the
+        # largest |v - rest|; allow one float32 step, far above that (no rest gap: the
+        # rest is the same)
         head = x[: int(detector.rest_samples), 0]
         finite = head[np.isfinite(head)]
         dev = np.abs(x[:, 0] - np.mean(finite)) if finite.size else np.zeros(1)
@@ -1186,7 +1237,8 @@ def check_detector_parity(
     """Compare a detector graph in onnxruntime with the batch detector (issue 6's rule).
 
     The batch detector scores the recordings as given (float64); the graph runs on
-    the float32 windows the runtime would feed it (:func:`detector_windows`), at
+    the windows the runtime would feed it (:func:`detector_windows`: float32, or
+    float64 for the FSR graphs), at
     the instants it would call it (the batch detector's decided samples on the
     runtime's hop grid). Decisions are ``score >= threshold`` on both sides.
 
@@ -1209,7 +1261,8 @@ def check_detector_parity(
         gate flipped because the graph's fixed rest differs from the recording's
         rest mean. Default: the largest such difference over the recordings; with the
         rest from the stream (``press_sign``) no rest differs, and the default is one
-        float32 step of the largest ``|v - rest|`` (the graph's float32 input).
+        float32 step of the largest ``|v - rest|`` (far above the few float64 steps
+        by which the graph's block sums and numpy's means differ).
     session : onnxruntime.InferenceSession, optional
         Reuse a session (else CPU, one thread).
 

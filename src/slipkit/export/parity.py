@@ -1,7 +1,8 @@
 """Parity of an exported graph with its estimator, on held-out frames (issue 6's rule).
 
 The graph runs in onnxruntime (CPU provider, one intra- and one inter-op
-thread, as on the gripper PC) on the frames cast to float32; the estimator runs
+thread, as on the gripper PC) on the frames cast to the graph's input dtype
+(float32, or float64 where :attr:`ExportedGraph.input_dtype` says so); the estimator runs
 its own score method (``decision_function`` / ``predict_proba`` / ``predict``,
 as :attr:`ExportedGraph.score_method` says) on the same frames as given. For a
 graph with the TacTip pin-velocity features inside, the estimator gets
@@ -55,10 +56,12 @@ def onnx_session(graph: ExportedGraph, *, threads: int = 1) -> Any:
 def run_graph(
     graph: ExportedGraph, X: ArrayLike, *, session: Any | None = None
 ) -> NDArray[np.float64]:
-    """The graph's score output on ``X`` (cast to float32), as float64."""
+    """The graph's score output on ``X`` (cast to the graph's input dtype, float32 or
+    float64, as the runtime feeds it), as float64."""
     sess = session if session is not None else onnx_session(graph)
     out = sess.run(
-        [graph.score_output], {graph.input_name: np.asarray(X, dtype=np.float32)}
+        [graph.score_output],
+        {graph.input_name: np.asarray(X, dtype=np.dtype(graph.input_dtype))},
     )[0]
     return np.asarray(out, dtype=np.float64)
 

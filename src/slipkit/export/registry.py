@@ -6,7 +6,8 @@ with its :func:`register_exporter` call, duplicates are refused unless
 subclass uses its parent's exporter unless it registers its own.
 
 Every graph an exporter returns obeys the same contract (checked by
-:func:`finalize_model`): one float32 input with a symbolic batch dimension, IR
+:func:`finalize_model`): one float32 (or float64) input with a symbolic batch
+dimension, IR
 version :data:`IR_VERSION` (onnx 1.23's ``helper.make_model`` writes IR 14, which
 onnxruntime 1.31 refuses), default-domain opset in :data:`SUPPORTED_OPSETS`, and
 ``onnx.checker.check_model`` passes.
@@ -51,7 +52,7 @@ class ExportedGraph:
     Parameters
     ----------
     model : onnx.ModelProto
-        The graph (IR :data:`IR_VERSION`, float32 input, checked).
+        The graph (IR :data:`IR_VERSION`, float32 or float64 input, checked).
     input_name : str
         Name of the single input.
     input_shape : tuple of (str or int)
@@ -86,8 +87,10 @@ class ExportedGraph:
         when the graph takes the estimator's own features.
     producers : dict of str to str
         Versions of the libraries that built the graph.
-    input_dtype : str
-        Always ``"float32"``.
+    input_dtype : {"float32", "float64"}
+        The graph input's dtype, what the runtime feeds (its ``INPUT_DTYPES``):
+        float32 for most graphs; float64 where a cast of a float32 input would be
+        a node of its own (the FSR and LWR graphs compute in float64).
     strict : bool
         The threshold rule's comparison: ``score > threshold`` (True, scikit-learn's
         ``predict``) or ``score >= threshold`` (False, the analytic detectors).
@@ -247,7 +250,8 @@ def finalize_model(model: onnx.ModelProto) -> onnx.ModelProto:
     """Stamp IR :data:`IR_VERSION` and the producer, then run ``onnx.checker.check_model``.
 
     Raises ExportError when the default-domain opset is not supported, the input
-    is not a single float32 tensor with a symbolic first dimension, or the checker
+    is not a single float32 or float64 tensor with a symbolic first dimension, or
+    the checker
     fails.
     """
     from slipkit import __version__
@@ -277,8 +281,8 @@ def finalize_model(model: onnx.ModelProto) -> onnx.ModelProto:
             f"graph {model.graph.name!r} has {len(inputs)} inputs; expected one"
         )
     tensor = inputs[0].type.tensor_type
-    if tensor.elem_type != onnx.TensorProto.FLOAT:
-        raise ExportError(f"input {inputs[0].name!r} is not float32")
+    if tensor.elem_type not in (onnx.TensorProto.FLOAT, onnx.TensorProto.DOUBLE):
+        raise ExportError(f"input {inputs[0].name!r} is not float32 or float64")
     dims = tensor.shape.dim
     if not dims or not dims[0].dim_param:
         raise ExportError(
