@@ -413,16 +413,18 @@ def export_fsr_touch_slip(
         for p in coeffs[1:-1]:
             acc = g.op("Mul", g.op("Add", acc, g.const(p, np.float64)), v)
         v = g.op("Add", acc, g.const(coeffs[-1], np.float64), stem="force")
-    if confirm:
-        score64 = _fsr_confirmed(g, v, detector, n_blocks, rest_sig, delta, sign)
-    elif gate:
+    if not confirm and gate:
         score64 = _fsr_gated(g, v, b, w, sign * per_s, sign, delta - sign * rest_sig)
     else:
-        deriv = g.op(
-            "MatMul", v, g.const(_fsr_deriv_row(b, w, sign * per_s), np.float64)
-        )  # (batch,)
-        ok = g.op("Not", _not_finite(g, deriv), stem="finite")
-        score64 = g.op("Where", ok, deriv, g.const(NO_SCORE, np.float64))
+        if confirm:
+            score = _fsr_confirmed(g, v, detector, n_blocks, rest_sig, delta, sign)
+        else:
+            deriv = g.op(
+                "MatMul", v, g.const(_fsr_deriv_row(b, w, sign * per_s), np.float64)
+            )  # (batch,)
+            ok = g.op("Not", _not_finite(g, deriv), stem="finite")
+            score = g.op("Where", ok, deriv, g.const(NO_SCORE, np.float64))
+        score64 = _float32_range(g, score)
     return _fsr_graph_out(
         g,
         inp,
@@ -448,6 +450,19 @@ _GATE_SCALE = 2.0**600
 #: below NO_SCORE (-3.4e38 > -2**128), a press above it (column >= 2**200) stays above
 #: every block derivative below 2**199.
 _GATE_SHIFT = 2.0**128
+
+
+def _float32_range(g: GraphBuilder, score: str) -> str:
+    # The float64 score within the float32 range, NO_SCORE at the bottom: a decision
+    # sink packs it as float32 (runtime/sinks.py), and below NO_SCORE it would read as
+    # "cannot decide" anyway.
+    return g.op(
+        "Clip",
+        score,
+        g.const(NO_SCORE, np.float64),
+        g.const(_F32_MAX, np.float64),
+        stem="score64",
+    )
 
 
 def _fsr_deriv_row(b: int, w: int, scale: float) -> NDArray[np.float64]:
@@ -478,7 +493,8 @@ def _fsr_gated(
     :data:`_GATE_SHIFT`, ``ReduceMin`` over the two columns is ``deriv`` when touched
     (``u >= 2**200 - 2**128``) and below :data:`NO_SCORE` when not (``u <=
     -2**128``; ``press == gate`` is untouched, as in the batch detector), and
-    ``Clip`` lifts the latter to exactly ``NO_SCORE``. The zero gate weights on the
+    ``Clip`` lifts the latter to exactly ``NO_SCORE`` (and keeps a derivative
+    within the float32 range, as a decision sink packs it). The zero gate weights on the
     previous block turn a NaN or inf anywhere in the window into NaN in ``u`` (0 *
     NaN = 0 * inf = NaN), and ``ReduceMin`` keeps a NaN in its first column: a
     non-finite window scores NaN (or ``NO_SCORE`` where ``u`` or ``deriv`` is
@@ -500,7 +516,7 @@ def _fsr_gated(
         low = g.op("ReduceMin", shifted, _axes(g, 1), keepdims=0, stem="gated")
     else:
         low = g.op("ReduceMin", shifted, axes=[1], keepdims=0, stem="gated")
-    return g.op("Clip", low, g.const(NO_SCORE, np.float64), stem="score64")
+    return _float32_range(g, low)
 
 
 #: Below every finite block score: the confirmed graph's "no derivative here" (the batch
