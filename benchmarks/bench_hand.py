@@ -168,19 +168,30 @@ def run_once(
     seconds: float,
     *,
     pace: bool = True,
+    pin_threads: bool = False,
+    **loop_kw: Any,
 ) -> dict[str, Any]:
     """Run ``names`` together (one name: alone); per stream: latency ns, budget ms.
+
+    ``loop_kw`` goes to :func:`~slipkit.runtime.hand.run_streams` (``busy_poll``,
+    ``spin_us``); ``pin_threads``: each session with one intra-op
+    and one inter-op thread (``slipkit-run --pin-threads``).
 
     Also ``"_cpu"``: the process's CPU time over the run's wall time (1.0 = one core).
     """
     from slipkit.runtime import StreamLoop, load_bundle
     from slipkit.runtime.hand import HandStream, ReplayFeed, StreamBinding, run_streams
+    from slipkit.runtime.realtime import RealtimeOptions, pinned_session
 
     streams = []
     step_ns: dict[str, list[int]] = {}
     for i, name in enumerate(names):
         binding = StreamBinding(name, bundles[name])
         bundle = load_bundle(bundles[name])
+        if pin_threads:
+            bundle = bundle.with_session(
+                pinned_session(bundle.session_spec, RealtimeOptions(pin_threads=True))
+            )
         n = max(int(seconds * bundle.manifest.frame.rate_hz), 1)
         frames, times = tiled_replay(bundle, n)
         source = ReplayFeed(frames, times, pace=pace)
@@ -189,7 +200,7 @@ def run_once(
             loop.step = _timed_step(loop.step, step_ns.setdefault(name, []))  # type: ignore[method-assign]
         streams.append(HandStream(i, binding, bundle, loop, source))
     cpu0, wall0 = time.process_time(), time.perf_counter()
-    run_streams(streams, mode, start_delay_s=0.05)
+    run_streams(streams, mode, start_delay_s=0.05, **loop_kw)
     cpu = (time.process_time() - cpu0) / (time.perf_counter() - wall0)
     out: dict[str, Any] = {"_cpu": cpu}
     for s in streams:
@@ -207,7 +218,13 @@ def run_once(
 
 
 def run_realtime(
-    bundles: dict[str, Path], names: list[str], seconds: float
+    bundles: dict[str, Path],
+    names: list[str],
+    seconds: float,
+    *,
+    cpus: tuple[int, ...] | None = None,
+    priority: str = "fifo",
+    **loop_kw: Any,
 ) -> tuple[dict[str, Any], list[str]]:
     """The hand in ``loop`` mode, paced, with ``slipkit-run --realtime``'s priority and GC.
 
@@ -219,14 +236,44 @@ def run_realtime(
     from slipkit.runtime.realtime import RealtimeOptions, apply_realtime, frozen_gc
 
     before = os.sched_getscheduler(0), os.sched_getparam(0)
-    state = apply_realtime(RealtimeOptions(priority="fifo", rt_priority=10))
+    affinity = os.sched_getaffinity(0)
+    nice_before = os.getpriority(os.PRIO_PROCESS, 0)
+    state = apply_realtime(
+        RealtimeOptions(cpus=cpus, priority=priority, rt_priority=10)
+    )
     try:
         with frozen_gc(True):
-            out = run_once(bundles, names, "loop", seconds)
+            out = run_once(bundles, names, "loop", seconds, **loop_kw)
     finally:
-        if state.applied:
-            os.sched_setscheduler(0, before[0], before[1])
+        if "priority" in state.applied:
+            if priority == "nice":
+                os.setpriority(os.PRIO_PROCESS, 0, nice_before)
+            else:
+                os.sched_setscheduler(0, before[0], before[1])
+        if "cpus" in state.applied:
+            os.sched_setaffinity(0, affinity)
     return out, list(state.notes)
+
+
+#: The hand (loop mode, paced) under real-time options, side by side in one run: key ->
+#: (the slipkit-run options it stands for, run_realtime keywords). The first is the
+#: configuration the earlier benchmark reported (SCHED_FIFO and the GC only).
+RT_CONFIGS: dict[str, tuple[str, dict[str, Any]]] = {
+    "loop_rt": ("--priority fifo --freeze-gc", {}),
+    "rt_pin": ("--realtime", {"pin_threads": True}),
+    "rt_spin": (
+        "--realtime --spin-us 200",
+        {"pin_threads": True, "spin_us": 200.0},
+    ),
+    "rt_bp": (
+        "--realtime --busy-poll --cpus 1",
+        {"pin_threads": True, "busy_poll": True, "cpus": (1,)},
+    ),
+    "bp": (
+        "--freeze-gc --pin-threads --busy-poll --cpus 1",
+        {"pin_threads": True, "busy_poll": True, "cpus": (1,), "priority": "normal"},
+    ),
+}
 
 
 def _pct_us(lat_ns: np.ndarray) -> tuple[float, float]:
@@ -326,7 +373,7 @@ def main() -> None:
         return
     # Paced (the sensors' rates): alone, the hand in one loop, the hand in threads;
     # unpaced (as fast as taken): alone and the hand in one loop (compute only).
-    configs = ["alone", "loop", "threads", "loop_rt", "alone_fast", "loop_fast"]
+    configs = ["alone", "loop", "threads", *RT_CONFIGS, "alone_fast", "loop_fast"]
     rt_notes: list[str] = []
     # name -> config -> list of (p50, p99, over, decisions) per round
     acc: dict[str, dict[str, list[tuple[float, float, int, int]]]] = {
@@ -358,9 +405,10 @@ def main() -> None:
             used = runs[c].pop("_cpu")
             if c in cpu:
                 cpu[c].append(used)
-        runs["loop_rt"], notes = run_realtime(bundles, names, args.seconds)
-        runs["loop_rt"].pop("_cpu")
-        rt_notes = notes or rt_notes
+        for c, (_, kw) in RT_CONFIGS.items():
+            runs[c], notes = run_realtime(bundles, names, args.seconds, **kw)
+            cpu.setdefault(c, []).append(runs[c].pop("_cpu"))
+            rt_notes = notes or rt_notes
         for c in configs:
             for name, r in runs[c].items():
                 lat = r["lat_ns"]
@@ -408,11 +456,17 @@ def main() -> None:
             f"{'yes' if lo[1] <= budget_us else 'no'} / "
             f"{'yes' if th[1] <= budget_us else 'no'} |"
         )
-        rt = med[name]["loop_rt"]
+        cells = []
+        for c in RT_CONFIGS:
+            rt = med[name][c]
+            cells.append(
+                f"{rt[0]:.1f} / {rt[1]:.1f} | {rt[2]} | "
+                f"{'yes' if rt[1] <= budget_us else 'no'}"
+            )
         rt_rows.append(
             f"| {name} | {budget_us:.0f} | {a[0]:.1f} / {a[1]:.1f} | "
-            f"{rt[0]:.1f} / {rt[1]:.1f} | {rt[1] / a[1]:.2f}x | {rt[2]} (of {rt[3]}) | "
-            f"{'yes' if rt[1] <= budget_us else 'no'} |"
+            + " | ".join(cells)
+            + " |"
         )
     print()
     print(
@@ -422,15 +476,20 @@ def main() -> None:
     )
     print()
     print(
-        "Paced, the hand in loop mode with the real-time options (SCHED_FIFO 10, GC "
-        "frozen)" + (f"; NOT APPLIED: {'; '.join(rt_notes)}" if rt_notes else "") + ":"
+        "Paced, the hand in loop mode with real-time options (fifo = SCHED_FIFO 10; "
+        "restored after each run)"
+        + (f"; NOT APPLIED: {'; '.join(rt_notes)}" if rt_notes else "")
+        + "; columns p50 / p99, over budget (of the decisions above), met:"
     )
     print()
-    print(
-        "| stream | budget p99 | alone (normal) p50 / p99 | hand, real-time p50 / p99 "
-        "| hand real-time / alone p99 | over budget | met |"
+    for i, (c, (opts, _)) in enumerate(RT_CONFIGS.items(), 1):
+        print(f"{i}. `{opts}` (CPU time / wall {np.median(cpu[c]):.2f})")
+    print()
+    head = " | ".join(
+        f"{i}. p50 / p99 | over | met" for i in range(1, len(RT_CONFIGS) + 1)
     )
-    print("|" + "---|" * 7)
+    print(f"| stream | budget p99 | alone (normal) p50 / p99 | {head} |")
+    print("|" + "---|" * (3 + 3 * len(RT_CONFIGS)))
     for row in rt_rows:
         print(row)
     print()

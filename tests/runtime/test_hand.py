@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import threading
 import time
@@ -12,7 +13,7 @@ import pytest
 from tests.runtime.helpers import LinearCase
 
 from slipkit.runtime import load_bundle
-from slipkit.runtime.cli import main, run
+from slipkit.runtime.cli import _busy_poll_notes, main, run
 from slipkit.runtime.errors import OptionError
 from slipkit.runtime.hand import (
     HandStream,
@@ -23,6 +24,7 @@ from slipkit.runtime.hand import (
     run_streams,
 )
 from slipkit.runtime.loop import StreamLoop
+from slipkit.runtime.realtime import RealtimeOptions
 from slipkit.runtime.sinks import DecisionReceiver
 from slipkit.runtime.sources import ReplaySource, UdpSender, UdpSource
 
@@ -332,3 +334,131 @@ def test_pace_without_streams_is_refused(
         main([str(a.path), "--pace"])
     assert 2 == info.value.code
     assert "--pace: applies to --stream runs only" in capsys.readouterr().err
+
+
+def _paced_run(
+    pair: tuple[LinearCase, LinearCase], mode: str, n: int, **kw: object
+) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """Both cases paced through run_streams; per stream (frames, timestamps, scores)."""
+    busy = bool(kw.get("busy_poll", False)) if mode == "threads" else False
+    spin_ns = int(float(kw.get("spin_us", 0.0)) * 1000) if mode == "threads" else 0
+    feeds = [
+        ReplayFeed(
+            c.frames,
+            c.timestamps,
+            pace=True,
+            max_frames=n,
+            busy_poll=busy,
+            spin_ns=spin_ns,
+        )
+        for c in pair
+    ]
+    streams = _hand(list(pair), list(feeds), ["a", "b"])
+    run_streams(streams, mode, **({} if mode == "threads" else kw))  # type: ignore[arg-type]
+    out = []
+    for s in streams:
+        assert s.result is not None
+        out.append((s.result.n_frames, s.result.timestamp, s.result.score))
+    return out
+
+
+@pytest.mark.parametrize(
+    ("mode", "kw"),
+    [
+        ("loop", {"busy_poll": True}),
+        ("loop", {"spin_us": 5000.0}),
+        ("threads", {"busy_poll": True}),
+        ("threads", {"spin_us": 5000.0}),
+    ],
+)
+def test_busy_polled_replays_decide_as_sleeping_ones(
+    pair: tuple[LinearCase, LinearCase], mode: str, kw: dict[str, object]
+) -> None:
+    """Spinning to each paced frame (busy poll, or a spin after a short sleep) hands over
+    every frame in order and gives the sleeping run's decisions."""
+    n = 15  # 0.15 s of frames at 100 Hz
+    sleeping = _paced_run(pair, mode, n)
+    spinning = _paced_run(pair, mode, n, **kw)
+    for (n0, t0, s0), (n1, t1, s1) in zip(sleeping, spinning, strict=True):
+        assert (n, n) == (n0, n1)
+        assert t0.tolist() == t1.tolist()
+        assert sorted(t1.tolist()) == t1.tolist()
+        np.testing.assert_array_equal(s0, s1)
+
+
+def test_busy_poll_wait_ends_a_hand(
+    pair: tuple[LinearCase, LinearCase], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A busy-polling hand with a silent UDP stream still ends on --wait (exit 1, named)."""
+    a, b = pair
+    status = run(
+        [
+            "--stream",
+            f"quiet={a.path}@udp:127.0.0.1:0",
+            "--stream",
+            f"b={b.path}",
+            "--pace",
+            "--frames",
+            "10",
+            "--busy-poll",
+            "--wait",
+            "0.2",
+        ]
+    )
+    out = capsys.readouterr().out
+    assert 1 == status
+    assert "quiet: no frame arrived within --wait 0.2 s" in out
+    assert "busy polling" in out
+
+
+def test_busy_poll_timeout_ends_a_hand(pair: tuple[LinearCase, LinearCase]) -> None:
+    """A busy-polling loop ends on timeout_s once its UDP sender goes quiet, every frame taken."""
+    a, b = pair
+    shape = (a.frames.shape[1],)
+    src = UdpSource("127.0.0.1", 0, shape, timeout_s=0.3, wait_s=5.0)
+    replay = ReplayFeed(b.frames, b.timestamps, pace=True, max_frames=10)
+    streams = _hand([a, b], [src, replay], ["u", "r"])
+    with UdpSender(*src.address) as tx:
+        tx.send_all(a.frames[:20], a.timestamps[:20])
+        run_streams(streams, "loop", busy_poll=True)
+    u, r = (s.result for s in streams)
+    assert u is not None
+    assert r is not None
+    assert (20, True, 10) == (u.n_frames, src.timed_out, r.n_frames)
+
+
+@pytest.mark.parametrize(
+    ("extra", "fragment"),
+    [
+        (["--pace", "--spin-us", "-1"], "--spin-us: must be in [0, 100000] us"),
+        (["--pace", "--spin-us", "nan"], "--spin-us: must be in [0, 100000] us"),
+        (["--spin-us", "50"], "--spin-us: spins before paced replay frames"),
+        (
+            ["--busy-poll", "--hand-mode", "threads"],
+            "--busy-poll: with --hand-mode threads",
+        ),
+    ],
+)
+def test_busy_poll_option_errors_are_one_line(
+    pair: tuple[LinearCase, LinearCase],
+    capsys: pytest.CaptureFixture[str],
+    extra: list[str],
+    fragment: str,
+) -> None:
+    """A bad --spin-us or --busy-poll combination exits 2 with one line naming the option."""
+    a, _ = pair
+    with pytest.raises(SystemExit) as info:
+        main(["--stream", f"a={a.path}", *extra])
+    err = capsys.readouterr().err
+    assert (2, 1) == (info.value.code, len(err.strip().splitlines()))
+    assert fragment in err
+
+
+def test_busy_poll_notes_name_what_defeats_it() -> None:
+    """--busy-poll under fifo and without --cpus gets one note line each; with --cpus at
+    normal priority none."""
+    args = argparse.Namespace(busy_poll=True)
+    bad = _busy_poll_notes(args, RealtimeOptions(priority="fifo"))
+    good = _busy_poll_notes(args, RealtimeOptions(cpus=(0,)))
+    assert (2, 0) == (len(bad), len(good))
+    assert "RT throttling" in bad[0]

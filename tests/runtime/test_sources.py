@@ -210,3 +210,60 @@ def test_udp_bad_wait_is_named(wait_s: float) -> None:
     """A wait_s outside [0, one day] (or not a number) is refused naming wait_s."""
     with pytest.raises(OptionError, match="wait_s"):
         UdpSource("127.0.0.1", 0, (3,), wait_s=wait_s)
+
+
+def test_udp_busy_poll_receives_every_datagram() -> None:
+    """A busy-polling UDP source over loopback hands over every frame, in order, values whole."""
+    x = frames(200)
+    ts = np.arange(200) / 100.0
+    with (
+        UdpSource("127.0.0.1", 0, (3,), max_frames=200, busy_poll=True) as src,
+        UdpSender(*src.address) as tx,
+    ):
+        sender = threading.Thread(target=tx.send_all, args=(x, ts))
+        sender.start()
+        got = [(f.frame_index, f.timestamp, f.values.copy()) for f in src]
+        sender.join()
+    assert list(range(200)) == [g[0] for g in got]
+    assert ts.tolist() == [g[1] for g in got]
+    np.testing.assert_array_equal(x, np.stack([g[2] for g in got]))
+    assert (200, 0, 0) == (src.n_received, src.n_rejected, src.n_lost)
+
+
+def test_udp_busy_poll_ends_on_wait_and_timeout() -> None:
+    """A busy-polling UDP source still ends: wait_s with no sender, timeout_s after the last frame."""
+    with UdpSource("127.0.0.1", 0, (3,), wait_s=0.1, busy_poll=True) as idle:
+        got_idle = list(idle)
+    with (
+        UdpSource("127.0.0.1", 0, (3,), timeout_s=0.1, busy_poll=True) as src,
+        UdpSender(*src.address) as tx,
+    ):
+        tx.send_all(frames(3), np.arange(3) / 100.0)
+        got = [f.frame_index for f in src]
+    assert ([], True, False) == (got_idle, idle.waited_out, idle.timed_out)
+    assert ([0, 1, 2], True, False) == (got, src.timed_out, src.waited_out)
+
+
+def test_udp_busy_poll_junk_does_not_keep_a_stream_alive() -> None:
+    """Under busy polling a flood of junk datagrams does not extend wait_s either."""
+    stop = threading.Event()
+    with (
+        UdpSource("127.0.0.1", 0, (3,), wait_s=0.2, busy_poll=True) as src,
+        UdpSender(*src.address) as tx,
+    ):
+
+        def junk() -> None:
+            for _ in range(5000):  # at most ~5 s even if the source never stops
+                if stop.is_set():
+                    return
+                tx.sock.sendto(b"junk", src.address)
+                time.sleep(0.001)
+
+        sender = threading.Thread(target=junk)
+        sender.start()
+        try:
+            got = list(src)
+        finally:
+            stop.set()
+            sender.join()
+    assert ([], True) == (got, src.waited_out)

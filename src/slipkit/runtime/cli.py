@@ -42,7 +42,7 @@ from slipkit.runtime.bundle import (
     load_bundle,
 )
 from slipkit.runtime.errors import FrameError, OptionError
-from slipkit.runtime.hand import MODES, run_hand_cli
+from slipkit.runtime.hand import MAX_SPIN_US, MODES, check_spin_us, run_hand_cli
 from slipkit.runtime.loop import StreamLoop
 from slipkit.runtime.modules import heavy_modules_loaded
 from slipkit.runtime.realtime import (
@@ -251,6 +251,22 @@ def _parser() -> argparse.ArgumentParser:
         action="store_true",
         help="shorthand for --priority fifo --freeze-gc --pin-threads (add --cpus)",
     )
+    rt.add_argument(
+        "--busy-poll",
+        action="store_true",
+        help="never sleep between frames: spin to each paced replay frame's due time "
+        "and poll UDP/LSL inputs without blocking; burns one core (pair it with "
+        "--cpus); not part of --realtime: under --priority fifo the kernel's RT "
+        "throttling stalls a spinning loop 50 ms every second (docs/deploy.md)",
+    )
+    rt.add_argument(
+        "--spin-us",
+        type=float,
+        default=0.0,
+        metavar="N",
+        help="--stream with --pace: sleep until N us before each replay frame is due, "
+        f"then spin the rest (0 to {MAX_SPIN_US:g}; default 0: sleep the whole wait)",
+    )
     return p
 
 
@@ -361,6 +377,18 @@ def _check_args(args: argparse.Namespace) -> None:
             "--wait",
             f"must be in [0, {MAX_TIMEOUT_S:g}] s (0: forever); got {args.wait}",
         )
+    check_spin_us(args.spin_us)
+    if args.spin_us and not args.pace:
+        raise OptionError(
+            "--spin-us", "spins before paced replay frames: give --stream ... --pace"
+        )
+    if args.busy_poll and args.stream and args.hand_mode == "threads":
+        raise OptionError(
+            "--busy-poll",
+            "with --hand-mode threads every stream's thread would spin, each "
+            "holding the GIL from the others; use --hand-mode loop (one thread polls "
+            "every stream)",
+        )
     if not 0 < args.load_deadline <= MAX_DEADLINE_S:
         raise OptionError(
             "--load-deadline",
@@ -413,6 +441,7 @@ def _run_source(
                 timeout_s=args.timeout,
                 wait_s=args.wait,
                 resync_after=args.resync_after,
+                busy_poll=args.busy_poll,
             )
         except OptionError as exc:
             raise OptionError("--udp", exc.problem) from None
@@ -443,6 +472,7 @@ def _run_source(
             max_frames=args.frames,
             timeout_s=args.timeout,
             wait_s=args.wait,
+            busy_poll=args.busy_poll,
         ) as lsrc:
             print(f"resolving {lsrc.where}", file=sys.stderr, flush=True)
             result = loop.run(lsrc)
@@ -476,13 +506,13 @@ def run(argv: Sequence[str] | None = None) -> int:
     _check_args(args)
     out: dict[str, Any]
     if args.stream:
-        # affinity, priority and the GC apply to the whole hand (its bundles' sessions
-        # are the manifests')
+        # affinity, priority and the GC apply to the whole hand, --pin-threads to each
+        # of its bundles' sessions
         rt_opts = _realtime_options(args)
-        for note in apply_realtime(rt_opts).notes:
+        for note in apply_realtime(rt_opts).notes + _busy_poll_notes(args, rt_opts):
             print(f"slipkit-run: note: {note}", file=sys.stderr)
         with frozen_gc(rt_opts.freeze_gc):
-            out, status = run_hand_cli(args)
+            out, status = run_hand_cli(args, rt_opts)
         return _finish(args, out, status)
     rt_opts = _realtime_options(args)
     bundle = load_bundle(args.bundle, deadline_s=args.load_deadline)
@@ -542,7 +572,7 @@ def run(argv: Sequence[str] | None = None) -> int:
         try:
             loop = StreamLoop(bundle, io_binding=args.io_binding, on_decision=hook)
             rt_state = apply_realtime(rt_opts)
-            for note in rt_state.notes:
+            for note in rt_state.notes + _busy_poll_notes(args, rt_opts):
                 print(f"slipkit-run: note: {note}", file=sys.stderr)
             with frozen_gc(rt_opts.freeze_gc):
                 result, name, udp, replay_line = _run_source(args, bundle, loop)
@@ -611,6 +641,23 @@ def run(argv: Sequence[str] | None = None) -> int:
         if args.check:
             print(f"check: {'passed' if status == 0 else 'FAILED'}")
     return _finish(args, out, status)
+
+
+def _busy_poll_notes(args: argparse.Namespace, opts: RealtimeOptions) -> list[str]:
+    """One-line warnings for ``--busy-poll`` combinations that defeat it."""
+    if not args.busy_poll:
+        return []
+    notes = []
+    if opts.priority == "fifo":
+        notes.append(
+            "--busy-poll with --priority fifo: the kernel's RT throttling "
+            "(/proc/sys/kernel/sched_rt_runtime_us) stops a thread that never sleeps "
+            "for the rest of each period (50 ms of every 1 s by default); prefer "
+            "--spin-us, or --busy-poll at normal priority on an isolated core"
+        )
+    if opts.cpus is None:
+        notes.append("--busy-poll burns one core: give it one with --cpus")
+    return notes
 
 
 def _realtime_options(args: argparse.Namespace) -> RealtimeOptions:

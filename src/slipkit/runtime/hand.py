@@ -50,6 +50,23 @@ in the socket while another stream computes is not counted; paced replays measur
 In ``threads`` mode a wake-up is stamped after the thread holds the GIL again, so a
 wait for the GIL after a sleep or a receive is not counted either.
 
+Busy polling (``--busy-poll``, ``--spin-us``)
+--------------------------------------------
+A decision right after a sleep costs several times one made back to back (caches and
+TLB gone cold, the core in an idle state, the vCPU descheduled). ``busy_poll`` never
+sleeps: in ``loop`` mode the thread polls every stream again at once when none had a
+frame (no ``select``), so paced replay frames are taken by spinning on
+:func:`time.perf_counter_ns` to their due time and UDP / LSL inputs are read without
+blocking; in ``threads`` mode (single-bundle runs) the sources spin the same way. It
+keeps one core 100 % busy: pair it with ``--cpus``. ``--timeout``, ``--wait``, the end
+of a replay and Ctrl-C end it as they end a sleeping run (every pass checks them).
+Under SCHED_FIFO the kernel's RT throttling (``sched_rt_runtime_us``, 0.95 s of every
+1 s by default) stops a thread that never sleeps for the rest of each period, so
+``--realtime`` does not include it. ``spin_us`` is the middle way: sleep until
+``spin_us`` before the next paced frame is due, then spin (the thread still sleeps
+between frames, so SCHED_FIFO is not throttled). A frame taken by spinning arrives at
+its due time, so its latency includes how late the spin noticed it.
+
 Standard library, numpy and onnxruntime only (``pylsl`` lazily, for LSL streams).
 """
 
@@ -73,6 +90,7 @@ from slipkit.errors import SlipkitError
 from slipkit.runtime.bundle import DEFAULT_DEADLINE_S, Bundle, load_bundle
 from slipkit.runtime.errors import FrameError, OptionError
 from slipkit.runtime.loop import LoopResult, StreamLoop
+from slipkit.runtime.realtime import RealtimeOptions, pinned_session
 from slipkit.runtime.session import ORT_ERRORS
 from slipkit.runtime.sinks import (
     MAX_STREAMS,
@@ -97,6 +115,8 @@ MODES = ("loop", "threads")
 IDLE_WAIT_S = 0.05
 #: Idle wait of the one-thread loop while an LSL inlet is open, s (inlets have no fd).
 LSL_POLL_S = 0.0005
+#: Longest ``spin_us`` (``--spin-us``), us: 0.1 s of spinning before each frame.
+MAX_SPIN_US = 100_000.0
 _NAME = re.compile(r"[A-Za-z0-9_.-]{1,64}")
 _SOURCE = re.compile(r"@(replay|udp|lsl):")
 
@@ -184,6 +204,19 @@ def check_bindings(bindings: Sequence[StreamBinding], option: str = "--stream") 
             ports[b.target] = b.name
 
 
+def check_spin_us(spin_us: float, option: str = "--spin-us") -> float:
+    """``spin_us`` checked to be in [0, :data:`MAX_SPIN_US`] us; OptionError naming ``option``."""
+    if not (
+        isinstance(spin_us, int | float)
+        and not isinstance(spin_us, bool)
+        and 0 <= spin_us <= MAX_SPIN_US  # False for NaN too
+    ):
+        raise OptionError(
+            option, f"must be in [0, {MAX_SPIN_US:g}] us; got {spin_us!r}"
+        )
+    return float(spin_us)
+
+
 class ReplayFeed:
     """Recorded frames, handed over as fast as taken or paced at their own times.
 
@@ -198,6 +231,12 @@ class ReplayFeed:
         clock) instead of at once (module docstring, *Pacing and latency*).
     max_frames : int, optional
         Only the first ``max_frames`` frames.
+    busy_poll : bool
+        Blocking iteration spins on :func:`time.perf_counter_ns` up to each paced
+        frame's due time instead of sleeping (module docstring, *Busy polling*).
+    spin_ns : int
+        Without ``busy_poll``: sleep until ``spin_ns`` before each due time and spin
+        the rest (0: sleep the whole wait), ns.
 
     Attributes
     ----------
@@ -212,8 +251,12 @@ class ReplayFeed:
         *,
         pace: bool = False,
         max_frames: int | None = None,
+        busy_poll: bool = False,
+        spin_ns: int = 0,
     ) -> None:
         n = len(frames) if max_frames is None else min(len(frames), max_frames)
+        self.busy_poll = bool(busy_poll)
+        self.spin_ns = int(spin_ns)
         self.frames = frames[:n]
         self.timestamps = timestamps[:n]
         self.pace = bool(pace)
@@ -269,14 +312,24 @@ class ReplayFeed:
             self.start()
         clock, sleep = time.perf_counter_ns, time.sleep
         frames, ts, start = self.frames, self._ts, self._start_ns
+        # Sleep until this long before a due time, then spin (busy polling: never sleep).
+        early = -1 if self.busy_poll else self.spin_ns
         for i in range(self._i, len(frames)):
             if self.pace:
                 due = start + self._offset_ns[i]
                 now = clock()
                 arrival = due
                 if now < due:
-                    sleep((due - now) / 1e9)
-                    arrival = clock()
+                    if early >= 0 and due - now > early:
+                        sleep((due - now - early) / 1e9)
+                        now = clock()
+                    if now >= due:
+                        arrival = now  # woke up late: the wake-up is not counted
+                    else:
+                        # Spin to the due time (the core stays hot); a frame handed
+                        # over by spinning arrives at its due time.
+                        while clock() < due:
+                            pass
             else:
                 arrival = clock()
             self._i = i + 1
@@ -343,8 +396,13 @@ def open_source(
     wait_s: float = DEFAULT_WAIT_S,
     resync_after: int = RESYNC_AFTER,
     pylsl: Any = None,
+    busy_poll: bool = False,
+    spin_us: float = 0.0,
 ) -> Any:
     """The source a binding names, opened (UDP bound; LSL resolved later, on start).
+
+    ``busy_poll`` and ``spin_us`` apply to blocking iteration (``threads`` mode);
+    ``loop`` mode polls every source itself (:func:`run_streams`).
 
     Raises
     ------
@@ -362,7 +420,14 @@ def open_source(
                 "no frames: the bundle has no replay.npz; give @SOURCE",
             )
         frames, times = load_replay(path, f.shape, f.rate_hz)
-        return ReplayFeed(frames, times, pace=pace, max_frames=max_frames)
+        return ReplayFeed(
+            frames,
+            times,
+            pace=pace,
+            max_frames=max_frames,
+            busy_poll=busy_poll,
+            spin_ns=int(spin_us * 1000),
+        )
     if binding.kind == "udp":
         assert binding.target is not None
         host, port = parse_address(binding.target, "--stream")
@@ -374,6 +439,7 @@ def open_source(
             timeout_s=timeout_s,
             wait_s=wait_s,
             resync_after=resync_after,
+            busy_poll=busy_poll,
         )
     from slipkit.runtime.lsl import LslSource
 
@@ -385,6 +451,7 @@ def open_source(
         timeout_s=timeout_s,
         wait_s=wait_s,
         pylsl=pylsl,
+        busy_poll=busy_poll,
     )
 
 
@@ -401,8 +468,19 @@ def _close(stream: HandStream) -> None:
 _STREAM_ERRORS: tuple[type[BaseException], ...] = (*ORT_ERRORS, SlipkitError, OSError)
 
 
-def _run_loop(streams: list[HandStream], start_ns: int) -> None:
-    """Serve every stream from this thread, round-robin (module docstring, ``loop``)."""
+def _run_loop(
+    streams: list[HandStream],
+    start_ns: int,
+    *,
+    busy_poll: bool = False,
+    spin_ns: int = 0,
+) -> None:
+    """Serve every stream from this thread, round-robin (module docstring, ``loop``).
+
+    ``busy_poll``: never wait, poll every stream again at once; ``spin_ns``: wait
+    until that long before the next paced frame is due, then poll without waiting
+    (module docstring, *Busy polling*).
+    """
     sel = selectors.DefaultSelector()
     polls_lsl = False
     for s in streams:
@@ -443,6 +521,9 @@ def _run_loop(streams: list[HandStream], start_ns: int) -> None:
                     active.remove(s)
             if got or not active:
                 continue
+            if busy_poll:
+                woke = clock()
+                continue
             wait = LSL_POLL_S if polls_lsl else IDLE_WAIT_S
             now = clock()
             for s in active:
@@ -450,7 +531,7 @@ def _run_loop(streams: list[HandStream], start_ns: int) -> None:
                 if isinstance(src, ReplayFeed):
                     due = src.next_due_ns()
                     if due is not None:
-                        wait = min(wait, max(due - now, 0) / 1e9)
+                        wait = min(wait, max(due - now - spin_ns, 0) / 1e9)
             if wait > 0:
                 if sel.get_map():
                     sel.select(wait)
@@ -498,19 +579,32 @@ def _run_threads(streams: list[HandStream], start_ns: int) -> None:
 
 
 def run_streams(
-    streams: list[HandStream], mode: str = "loop", *, start_delay_s: float = 0.01
+    streams: list[HandStream],
+    mode: str = "loop",
+    *,
+    start_delay_s: float = 0.01,
+    busy_poll: bool = False,
+    spin_us: float = 0.0,
 ) -> None:
     """Run every stream to its end in ``mode`` (:data:`MODES`); results land on the streams.
 
     Paced replays count from one common start, ``start_delay_s`` after the call (so
-    every thread has started before the first frame is due).
+    every thread has started before the first frame is due). ``busy_poll`` and
+    ``spin_us`` (us) are for ``loop`` mode (module docstring, *Busy polling*; in
+    ``threads`` mode the sources carry their own ``busy_poll`` and ``spin_ns``).
     """
     if mode not in MODES:
         raise OptionError("mode", f"must be one of {', '.join(MODES)}; got {mode!r}")
+    check_spin_us(spin_us)
     start_ns = time.perf_counter_ns() + int(start_delay_s * 1e9)
     try:
         if mode == "loop":
-            _run_loop(streams, start_ns)
+            _run_loop(
+                streams,
+                start_ns,
+                busy_poll=busy_poll,
+                spin_ns=int(spin_us * 1000),
+            )
         else:
             _run_threads(streams, start_ns)
     finally:
@@ -596,9 +690,14 @@ def table_lines(summaries: list[dict[str, Any]]) -> list[str]:
 
 
 def build_streams(
-    args: argparse.Namespace, bindings: Sequence[StreamBinding]
+    args: argparse.Namespace,
+    bindings: Sequence[StreamBinding],
+    rt_opts: RealtimeOptions | None = None,
 ) -> list[HandStream]:
     """Load every bundle, open every source, attach the sinks ``args`` asks for.
+
+    With ``rt_opts.pin_threads`` every bundle's session gets one intra-op and one
+    inter-op thread (:func:`~slipkit.runtime.realtime.pinned_session`).
 
     Any failure closes what was opened and raises an :class:`OptionError` naming
     ``--stream`` and the stream.
@@ -617,6 +716,10 @@ def build_streams(
                     b.bundle,
                     deadline_s=getattr(args, "load_deadline", DEFAULT_DEADLINE_S),
                 )
+                if rt_opts is not None and rt_opts.pin_threads:
+                    bundle = bundle.with_session(
+                        pinned_session(bundle.session_spec, rt_opts)
+                    )
                 source = open_source(
                     b,
                     bundle,
@@ -625,6 +728,8 @@ def build_streams(
                     timeout_s=args.timeout,
                     wait_s=args.wait,
                     resync_after=args.resync_after,
+                    busy_poll=getattr(args, "busy_poll", False),
+                    spin_us=getattr(args, "spin_us", 0.0),
                 )
                 sinks: list[Any] = []
                 udp_sink = None
@@ -662,11 +767,17 @@ def build_streams(
     return streams
 
 
-def run_hand_cli(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
-    """``slipkit-run --stream ...``: build, run, print the table; (summary, exit status)."""
+def run_hand_cli(
+    args: argparse.Namespace, rt_opts: RealtimeOptions | None = None
+) -> tuple[dict[str, Any], int]:
+    """``slipkit-run --stream ...``: build, run, print the table; (summary, exit status).
+
+    ``rt_opts``: the real-time options (only ``pin_threads`` is applied here, to each
+    bundle's session; the CLI applies the rest to the process).
+    """
     bindings = [parse_stream(t) for t in args.stream]
     check_bindings(bindings)
-    streams = build_streams(args, bindings)
+    streams = build_streams(args, bindings, rt_opts)
     for s in streams:
         src = s.source
         if isinstance(src, UdpSource):
@@ -675,11 +786,22 @@ def run_hand_cli(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
                 file=sys.stderr,
                 flush=True,
             )
-    run_streams(streams, args.hand_mode)
+    run_streams(
+        streams,
+        args.hand_mode,
+        busy_poll=getattr(args, "busy_poll", False),
+        spin_us=getattr(args, "spin_us", 0.0),
+    )
     summaries = [stream_summary(s) for s in streams]
     print(
         f"hand: {len(streams)} streams, mode {args.hand_mode}"
         + (", replays paced at their timestamps" if args.pace else "")
+        + (", busy polling" if getattr(args, "busy_poll", False) else "")
+        + (
+            f", spinning {args.spin_us:g} us before each due frame"
+            if getattr(args, "spin_us", 0.0)
+            else ""
+        )
     )
     for line in table_lines(summaries):
         print(line)
@@ -724,6 +846,8 @@ def run_hand_cli(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
         "hand": {
             "mode": args.hand_mode,
             "pace": bool(args.pace),
+            "busy_poll": bool(getattr(args, "busy_poll", False)),
+            "spin_us": float(getattr(args, "spin_us", 0.0)),
             "streams": [s.name for s in streams],
             "within_budget": all_met,
         },

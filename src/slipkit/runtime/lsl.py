@@ -114,6 +114,10 @@ class LslSource:
         iteration started, s; 0 waits forever; in [0, 86400].
     pylsl : module, optional
         The ``pylsl`` module (tests pass a stand-in); imported when omitted.
+    busy_poll : bool
+        Iteration pulls with a zero timeout over and over instead of waiting in
+        ``pull_sample``: the thread never sleeps (one core kept busy; ``slipkit-run
+        --busy-poll``, as :class:`~slipkit.runtime.sources.UdpSource`).
 
     Attributes
     ----------
@@ -138,6 +142,7 @@ class LslSource:
         timeout_s: float = 2.0,
         wait_s: float = DEFAULT_WAIT_S,
         pylsl: ModuleType | None = None,
+        busy_poll: bool = False,
     ) -> None:
         if not isinstance(name, str) or not name.strip() or "\0" in name:
             raise OptionError("--lsl", f"must be an LSL stream name; got {name!r}")
@@ -153,6 +158,7 @@ class LslSource:
         self.frame_shape = tuple(frame_shape)
         self.n_values = math.prod(self.frame_shape)
         self.max_frames = max_frames
+        self.busy_poll = bool(busy_poll)
         # The received sample is copied into this buffer (the loop copies it again
         # into its ring buffer at once, as for UDP).
         self._values = np.zeros(self.frame_shape, dtype=np.float64)
@@ -267,6 +273,13 @@ class LslSource:
 
     def __iter__(self) -> Iterator[Frame]:
         self.open()
+        if self.busy_poll:
+            poll = self.poll
+            while not self.ended:
+                frame = poll()
+                if frame is not None:
+                    yield frame
+            return
         now = time.monotonic
         while not self.ended and not self._full():
             left = 3600.0 if self._deadline is None else self._deadline - now()
