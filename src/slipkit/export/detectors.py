@@ -1160,6 +1160,9 @@ def detector_windows(
     inst = graph.instants(len(x))
     c = x.shape[1]
     shape = tuple(int(s) for s in graph.input_shape[1:])
+    if graph.preprocessing and math.prod(shape) != graph.window * c:
+        # the steps make the graph input (e.g. sliding_spectrum): raw windows
+        shape = (int(graph.window), c)
     if len(inst) == 0:
         return np.empty((0, *shape), dtype=dtype), inst
     view = sliding_window_view(x, (graph.window, c))[:, 0]  # row j = samples j..j+W-1
