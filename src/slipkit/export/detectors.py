@@ -486,9 +486,8 @@ def _fsr_gated(
 
     ``deriv = deriv_scale (mean(last) - mean(previous))``; touched where ``press =
     -sign mean(last) > gate``. Node dispatch, not arithmetic, is a batch-1 call's
-    cost, and ``Where`` and ``Split`` are the dearest small kernels in onnxruntime
-    (~0.6-0.7 us each against ~0.1 us for an elementwise op), so the gate is a
-    minimum instead: one ``Gemm`` gives ``[u, deriv]`` with ``u = K (press - gate)``
+    cost, and ``Where`` and ``Split`` were the dearest small kernels in scratch
+    timings (several times an elementwise op), so the gate is a minimum instead: one ``Gemm`` gives ``[u, deriv]`` with ``u = K (press - gate)``
     (``K`` = :data:`_GATE_SCALE`, exact), ``Add`` shifts ``u`` down by
     :data:`_GATE_SHIFT`, ``ReduceMin`` over the two columns is ``deriv`` when touched
     (``u >= 2**200 - 2**128``) and below :data:`NO_SCORE` when not (``u <=
