@@ -267,3 +267,20 @@ def test_udp_busy_poll_junk_does_not_keep_a_stream_alive() -> None:
             stop.set()
             sender.join()
     assert ([], True) == (got, src.waited_out)
+
+
+def test_lsl_busy_poll_takes_every_sample_and_times_out(tmp_path: Path) -> None:
+    """A busy-polling LSL source (stand-in pylsl) hands over every queued sample in order,
+    then ends on timeout_s."""
+    from tests.runtime.test_lsl import FakePylsl, _fake_sensor
+
+    from slipkit.runtime.lsl import LslSource
+
+    case = LinearCase(tmp_path)
+    fake = FakePylsl()
+    _fake_sensor(fake, "tactile", case, 50)
+    src = LslSource("tactile", (3,), timeout_s=0.1, pylsl=fake, busy_poll=True)
+    got = [(f.frame_index, f.timestamp) for f in src]
+    assert list(range(50)) == [g[0] for g in got]
+    assert case.timestamps[:50].tolist() == [g[1] for g in got]
+    assert (50, True) == (src.n_received, src.timed_out)
