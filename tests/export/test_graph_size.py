@@ -211,3 +211,33 @@ def test_fsr_graph_scores_match_on_a_batch_and_one_window_at_a_time() -> None:
     batch = sess.run(None, {graph.input_name: wins})[0]
     one = np.concatenate([sess.run(None, {graph.input_name: x[None]})[0] for x in wins])
     np.testing.assert_array_equal(batch, one)
+
+
+def test_lwr_bundle_takes_float64_frames_and_scores_predict(tmp_path: Path) -> None:
+    """An LWR bundle declares float64 in and out; StreamLoop's scores equal predict on the baseline-subtracted frames to 1e-9 N."""
+    X, Y = _force_data()
+    lwr = LocalLinearRegressor(n_fields=7, random_state=0).fit(X[:200], Y[:200])
+    graph = export(lwr)
+    man = manifest(
+        19,
+        channels=19,
+        window=1,
+        k=1,
+        preprocessing=[{"op": "baseline_first", "frames": 5}],
+        decision={"output": "score", "rule": "threshold", "column": 2},
+    )
+    man["inputs"] = [{"name": graph.input_name, "dtype": "float64", "shape": [1, 19]}]
+    man["outputs"] = [{"name": graph.score_output}]  # dtype and shape from the graph
+    bundle = load_bundle(write_bundle(tmp_path / "lwr", graph.serialize(), man))
+    frames = 2000.0 + X[200:260]
+    loop = StreamLoop(bundle)
+    for i, f in enumerate(frames):
+        loop.step(f, i / 300.0)
+    res = loop.result()
+    base = np.array([np.median(frames[: min(i + 1, 5)], axis=0) for i in range(60)])
+    ref = lwr.predict(frames - base)[:, 2]
+    assert ("float64", list(range(60))) == (
+        bundle.manifest.outputs[0].dtype,
+        res.frame.tolist(),
+    )
+    np.testing.assert_allclose(res.score, ref, rtol=0, atol=1e-9)
