@@ -12,6 +12,8 @@ Usage::
     slipkit-run exports/tactip_svm --lsl TacTip --lsl-out SlipDecisions
     slipkit-run --stream index=bundles/biotac@udp:0.0.0.0:9001 \
                 --stream palm=bundles/fsr@udp:0.0.0.0:9002 --send 127.0.0.1:9100
+    slipkit-run --stream ... --pace --realtime --cpus 1 --spin-us 450  # spin before frames
+    slipkit-run exports/fsr --udp 0.0.0.0:9000 --cpus 1 --busy-poll   # never sleep: one core
 
 With ``--stream`` (repeated) one process serves a whole hand: each bundle on its own
 input, reported per stream (:mod:`slipkit.runtime.hand`).
