@@ -1,6 +1,7 @@
 """Deadlines under load: each family's bundle replayed with and without a competing CPU-bound process, real-time options off and on.
 
 Run: ``.venv/bin/python benchmarks/bench_load.py [--frames 6000] [--core 0] [--keep DIR]
+[--competitors all|N]
 [--families tactip,fsr,biotac,sliptack,sliptack_full,davis]``.
 
 1. Small bundles are made in a temp folder (or ``--keep``) with ``slipkit train``'s and
@@ -14,8 +15,11 @@ Run: ``.venv/bin/python benchmarks/bench_load.py [--frames 6000] [--core 0] [--k
    (``davis_release``, the ``davis_areas`` op).
 2. Each bundle's ``replay.npz`` (its first ``--frames`` frames, unpaced) runs through
    ``slipkit-run`` in a fresh process under four conditions, in this order per bundle:
-   ``quiet`` / ``load`` (a busy-looping Python process pinned to ``--core``, started
-   before and killed after) x ``options off`` (no real-time option) / ``on``
+   ``quiet`` / ``load`` (busy-looping Python processes, one pinned to each core the
+   benchmark may use - ``--competitors all``, the default - or to the first N of them
+   starting at ``--core``; started before and killed after: with a free core left, a
+   loop without options simply runs there and the load shows nothing) x ``options
+   off`` (no real-time option) / ``on``
    (``--cpus <core> --realtime``: that core, SCHED_FIFO priority 10, GC frozen, one
    onnxruntime thread). With the options on, the loop shares its core with the
    competitor and outranks it.
@@ -100,8 +104,32 @@ def build(root: Path, names: list[str]) -> dict[str, Path]:
     return out
 
 
+def competitor_cores(core: int, competitors: str) -> list[int]:
+    """The cores the load's busy processes are pinned to: ``core`` first, then the others."""
+    allowed = sorted(os.sched_getaffinity(0))
+    if core not in allowed:
+        raise SystemExit(f"--core {core}: not one of this process's cores {allowed}")
+    order = [core] + [c for c in allowed if c != core]
+    if competitors == "all":
+        return order
+    try:
+        n = int(competitors)
+    except ValueError:
+        raise SystemExit(
+            f"--competitors: 'all' or a count; got {competitors!r}"
+        ) from None
+    if not 1 <= n <= len(order):
+        raise SystemExit(f"--competitors: 1..{len(order)} or 'all'; got {n}")
+    return order[:n]
+
+
 def run_one(
-    bundle: Path, frames: int, core: int, load: bool, options: bool
+    bundle: Path,
+    frames: int,
+    core: int,
+    load: bool,
+    options: bool,
+    busy_cores: list[int] | None = None,
 ) -> dict[str, Any]:
     """One ``slipkit-run`` replay in a fresh process; its --json summary."""
     with tempfile.TemporaryDirectory() as tmp:
@@ -118,16 +146,19 @@ def run_one(
         ]
         if options:
             cmd += ["--cpus", str(core), "--realtime"]
-        busy = None
+        busy = []
         if load:
-            busy = subprocess.Popen([sys.executable, "-c", BUSY, str(core)])
-            time.sleep(0.3)  # let it reach its core
+            busy = [
+                subprocess.Popen([sys.executable, "-c", BUSY, str(c)])
+                for c in (busy_cores or [core])
+            ]
+            time.sleep(0.3)  # let them reach their cores
         try:
             proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
         finally:
-            if busy is not None:
-                busy.kill()
-                busy.wait()
+            for b in busy:
+                b.kill()
+                b.wait()
         if proc.returncode not in (0, 1) or not js.exists():
             raise SystemExit(f"{' '.join(cmd)} failed: {proc.stderr.strip()}")
         out = json.loads(js.read_text())
@@ -144,10 +175,16 @@ def main() -> None:
     )
     ap.add_argument("--families", default=",".join(FAMILIES))
     ap.add_argument(
+        "--competitors",
+        default="all",
+        help="busy processes under load: 'all' (one per core, default) or a count",
+    )
+    ap.add_argument(
         "--rounds", type=int, default=3, help="SlipTack side-by-side rounds (default 3)"
     )
     args = ap.parse_args()
     names = [n for n in args.families.split(",") if n]
+    busy_cores = competitor_cores(args.core, args.competitors)
     unknown = sorted(set(names) - set(FAMILIES))
     if unknown:
         raise SystemExit(
@@ -164,8 +201,9 @@ def main() -> None:
             bundles = build(root, names)
         GlobalHydra.instance().clear()
         print(
-            f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}; competitor and "
-            f"--cpus on core {args.core}; {args.frames} frames per run, unpaced; ms"
+            f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}; under load one "
+            f"busy process on each of cores {busy_cores}; --cpus {args.core} with the "
+            f"options; {args.frames} frames per run, unpaced; ms"
         )
         head = (
             f"| {'bundle':13s} | budget | load  | options | decisions | p50    | p99    "
@@ -177,7 +215,9 @@ def main() -> None:
         for name in names:
             for load in (False, True):
                 for options in (False, True):
-                    s = run_one(bundles[name], args.frames, args.core, load, options)
+                    s = run_one(
+                        bundles[name], args.frames, args.core, load, options, busy_cores
+                    )
                     lat = s["latency_ms"] or {}
                     notes.update(s["notes"])
                     print(
