@@ -56,6 +56,21 @@ the sensor family's ``configs/deploy`` value, used when the data has no rate) an
 checked provenance in ``training`` (``refit_on_all_data``, ``scored_on``,
 ``held_out``, ``replay``). This runtime reads versions 2 and 3
 (:data:`READ_VERSIONS`); the digest covers every field of both.
+
+Recurrent state (optional ``state``, no version bump: a bundle without it reads as
+before, and a runtime that does not know the field refuses it as unknown rather than
+running a recurrent graph from a zero state every frame)::
+
+      "state": [{"input": "h_in", "output": "h_out", "shape": [1, 16],
+                 "dtype": "float32"}]
+
+Each entry names a graph input the loop feeds besides the frame input and the graph
+output that holds its next value; :class:`~slipkit.runtime.loop.StreamLoop` starts it
+at zeros, carries the output into the input after every scored frame and sets it back
+to zeros on a gap, a bad frame, a window skipped as non-finite and ``reset()``
+(``docs/deploy.md``, "Recurrent state"). At most :data:`MAX_STATE` entries, each of
+at most ``MAX_VALUES`` values; the names must be graph inputs / outputs of that shape
+and dtype (checked at load).
 """
 
 from __future__ import annotations
@@ -127,8 +142,13 @@ TOP_FIELDS = (
     "producer",
     "training",
     "files",
+    "state",
     DIGEST_FIELD,
 )
+#: Most recurrent state tensors (``state`` entries) a bundle may carry.
+MAX_STATE = 8
+#: dtypes a state tensor may have (the loop keeps it in a numpy buffer of that dtype).
+STATE_DTYPES = ("float32", "float64")
 #: Graph input dtypes the loop can feed (ONNX type string -> manifest name).
 INPUT_DTYPES = {"tensor(float)": "float32", "tensor(double)": "float64"}
 #: ONNX type strings of outputs the decision can read.
@@ -197,6 +217,28 @@ class TensorSpec:
         if self.shape is None or any(d is None for d in self.shape):
             raise ValueError(f"tensor {self.name!r} has no static shape: {self.shape}")
         return tuple(int(d) for d in self.shape if d is not None)
+
+
+@dataclass(frozen=True)
+class StateSpec:
+    """One recurrent state tensor the loop carries between frames (manifest ``state``).
+
+    Attributes
+    ----------
+    input : str
+        Graph input fed the state (zeros at the start and after a reset).
+    output : str
+        Graph output holding the next state (fed back after every scored frame).
+    shape : tuple of int
+        Static shape of both.
+    dtype : {"float32", "float64"}
+        Their element type.
+    """
+
+    input: str
+    output: str
+    shape: tuple[int, ...]
+    dtype: str
 
 
 def onnx_dtype(type_str: str) -> str:
@@ -333,6 +375,8 @@ class Manifest:
         File name -> sha256 hex, ``model.onnx`` always among them.
     raw : dict
         The decoded JSON as read.
+    state : tuple of StateSpec
+        Recurrent state the loop carries between frames (``()``: none).
     """
 
     name: str
@@ -349,6 +393,7 @@ class Manifest:
     training: dict[str, Any]
     files: dict[str, str]
     raw: dict[str, Any]
+    state: tuple[StateSpec, ...] = ()
 
 
 def _output_shape(f: Fields) -> tuple[int | None, ...]:
@@ -409,6 +454,43 @@ def _tensors(top: Fields, key: str, *, need_shape: bool) -> tuple[TensorSpec, ..
     names = [s.name for s in specs]
     if len(set(names)) != len(names):
         raise top.error(key, f"names must be unique; got {names}")
+    return tuple(specs)
+
+
+def _state(
+    top: Fields, inputs: tuple[TensorSpec, ...], decision_output: str
+) -> tuple[StateSpec, ...]:
+    """The optional ``state`` list (see the module docstring), checked without the graph."""
+    value = top.raw("state", [])
+    if not isinstance(value, list):
+        raise top.error(
+            "state", "must be a list of {input, output, shape, dtype} objects"
+        )
+    if len(value) > MAX_STATE:
+        raise top.error("state", f"lists {len(value)} tensors; at most {MAX_STATE}")
+    specs = []
+    for i, item in enumerate(value):
+        f = Fields(top.file, item, f"state[{i}]")
+        f.only(("input", "output", "shape", "dtype"))
+        spec = StateSpec(
+            input=f.string("input"),
+            output=f.string("output"),
+            shape=f.integers("shape", max_product=MAX_VALUES),
+            dtype=f.string("dtype", choices=STATE_DTYPES),
+        )
+        if spec.input == inputs[0].name:
+            raise f.error(
+                "input", f"{spec.input!r} is the frame input inputs[0]; name another"
+            )
+        if spec.output == decision_output:
+            raise f.error(
+                "output",
+                f"{spec.output!r} is the score output decision.output; name another",
+            )
+        for key in ("input", "output"):
+            if any(getattr(s, key) == getattr(spec, key) for s in specs):
+                raise f.error(key, f"{getattr(spec, key)!r} is named twice in state")
+        specs.append(spec)
     return tuple(specs)
 
 
@@ -691,7 +773,9 @@ def validate_manifest(obj: object, file: str = MANIFEST_FILE) -> Manifest:
                 DIGEST_FIELD,
                 f"must be a 64-digit lower-case sha256 hex; got {digest!r}",
             )
+    state = _state(top, inputs, decision.output)
     return Manifest(
+        state=state,
         name=name,
         frame=frame,
         preprocessing=tuple(steps),
@@ -817,11 +901,18 @@ def _check_graph(
     top = Fields(manifest_file, manifest.raw)
     (want,) = manifest.inputs
     graph_inputs = session.get_inputs()
+    if manifest.state:
+        _check_state(manifest, session, top)
+        state_inputs = {s.input for s in manifest.state}
+        graph_inputs = [g for g in graph_inputs if g.name not in state_inputs]
     if len(graph_inputs) != 1:
         raise BundleError(
             model_file,
             None,
-            f"the graph has {len(graph_inputs)} inputs; the runtime feeds exactly one",
+            f"the graph has {len(graph_inputs)} inputs besides the state; the runtime "
+            "feeds exactly one"
+            if manifest.state
+            else f"the graph has {len(graph_inputs)} inputs; the runtime feeds exactly one",
         )
     got = graph_inputs[0]
     if got.name != want.name:
@@ -873,6 +964,37 @@ def _check_graph(
         )
 
 
+def _check_state(
+    manifest: Manifest, session: ort.InferenceSession, top: Fields
+) -> None:
+    """Each ``state`` entry names a graph input and output of its shape and dtype."""
+    ins = {g.name: g for g in session.get_inputs()}
+    outs = {g.name: g for g in session.get_outputs()}
+    for i, s in enumerate(manifest.state):
+        for key, graph in (("input", ins), ("output", outs)):
+            name = getattr(s, key)
+            if name not in graph:
+                raise top.error(
+                    f"state[{i}].{key}",
+                    f"{name!r} is not a graph {key}; the graph has {sorted(graph)}",
+                )
+            g = graph[name]
+            if onnx_dtype(g.type) != s.dtype:
+                raise top.error(
+                    f"state[{i}].dtype",
+                    f"is {s.dtype!r} but the graph's {key} {name!r} is {g.type}",
+                )
+            dims = list(g.shape or [])
+            if len(dims) != len(s.shape) or any(
+                isinstance(d, int) and d != w
+                for d, w in zip(dims, s.shape, strict=False)
+            ):
+                raise top.error(
+                    f"state[{i}].shape",
+                    f"is {list(s.shape)} but the graph's {key} {name!r} has shape {dims}",
+                )
+
+
 def _check_decision_size(
     manifest: Manifest,
     session: ort.InferenceSession,
@@ -884,12 +1006,27 @@ def _check_decision_size(
     shape the manifest gives and the entries the rule reads."""
     (inp,) = manifest.inputs
     x = np.zeros(inp.static_shape, dtype=np.dtype(inp.dtype))
-    (score,) = run_with_deadline(
-        session, [manifest.decision.output], {inp.name: x}, deadline_s, model_file
+    feed = {inp.name: x}
+    feed.update(
+        {s.input: np.zeros(s.shape, dtype=np.dtype(s.dtype)) for s in manifest.state}
+    )
+    score, *states = run_with_deadline(
+        session,
+        [manifest.decision.output, *(s.output for s in manifest.state)],
+        feed,
+        deadline_s,
+        model_file,
     )
     score = np.asarray(score)
     size = int(score.size)
     top = Fields(manifest_file, manifest.raw)
+    for i, (s, h) in enumerate(zip(manifest.state, states, strict=True)):
+        if tuple(np.shape(h)) != s.shape:
+            raise top.error(
+                f"state[{i}].shape",
+                f"is {list(s.shape)} but the graph's first call gave output "
+                f"{s.output!r} of shape {list(np.shape(h))}",
+            )
     d = manifest.decision
     for i, out in enumerate(manifest.outputs):
         if (

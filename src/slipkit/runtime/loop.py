@@ -66,6 +66,19 @@ value check: the graph input's check covers it, and only an input that fails it 
 the frame tested, to name it (``StreamLoop._step_hop1``; same results as the full
 path). ``benchmarks/bench_runtime_loop.py`` and ``benchmarks/bench_deploy.py`` measure
 the loop's per-frame latency with these checks in place.
+
+Recurrent state
+---------------
+A bundle whose manifest lists ``state`` (a frame-by-frame recurrent model: frame and
+``h`` in, score and ``h_next`` out) has each state tensor in a preallocated buffer
+fed to the graph beside the frame input; its output lands in a second preallocated
+buffer (bound once through the IOBinding) and is copied into the first after every
+scored window, so no array is allocated per frame. The state starts at zeros and is
+set back to zeros on a flagged frame, a gap, a window skipped because its graph
+input or score was not finite, and :meth:`StreamLoop.reset`: the first window scored
+after any of these starts from a fresh state, as if a new recording began there.
+Each such event is counted (``state_resets``). A stateful bundle never takes the
+hop-1 fast path (``_step_hop1``): :meth:`StreamLoop.step` handles the state.
 """
 
 from __future__ import annotations
@@ -149,6 +162,10 @@ class LoopResult:
         The decision's class names (None: an unclassed threshold on a regressor).
     slip_classes : tuple of str
         The classes that count as slip.
+    state_resets : int
+        Times a stateful bundle's recurrent state was set back to zeros (a flagged
+        frame, a gap, a non-finite window; module docstring, *Recurrent state*);
+        0 without state.
     """
 
     frame: NDArray[np.int64]
@@ -173,6 +190,7 @@ class LoopResult:
     )
     classes: tuple[str, ...] | None = None
     slip_classes: tuple[str, ...] = ()
+    state_resets: int = 0
 
     def class_counts(self) -> dict[str, int] | None:
         """Decisions per class, in class order (None when the bundle names no classes)."""
@@ -197,7 +215,8 @@ class LoopResult:
         decided class of each (None without classes) and ``slip_decisions`` those
         whose class is one of ``slip_classes``; ``bad_frames``,
         ``bad_by_reason``, ``skipped_windows``, ``nonfinite_windows`` and ``gaps`` count
-        what the loop flagged (module docstring, *Bad frames*).
+        what the loop flagged (module docstring, *Bad frames*); ``state_resets``
+        the times a recurrent state was zeroed (*Recurrent state*).
         """
         return {
             "bundle": self.name,
@@ -207,6 +226,7 @@ class LoopResult:
             "skipped_windows": self.skipped_windows,
             "nonfinite_windows": self.nonfinite_windows,
             "gaps": self.gaps,
+            "state_resets": self.state_resets,
             "decisions": len(self.slip),
             "decisions_by_class": self.class_counts(),
             "slip_classes": list(self.slip_classes),
@@ -348,8 +368,17 @@ class StreamLoop:
         self._input_finite = np.zeros(self._input.size, dtype=bool)
         self._input_ok = good * self._input.size
         self._feed = {inp.name: self._input}
+        # Recurrent state (module docstring): h_in buffers fed to the graph, h_out
+        # buffers the graph writes, copied into h_in after each scored window.
+        self._state = m.state
+        self._h_in = [np.zeros(s.shape, dtype=np.dtype(s.dtype)) for s in m.state]
+        self._h_out = [np.zeros_like(h) for h in self._h_in]
+        self._h_pairs = tuple(zip(self._h_in, self._h_out, strict=True))
+        self._feed.update(
+            {s.input: h for s, h in zip(m.state, self._h_in, strict=True)}
+        )
         d = m.decision
-        self._out_names = [d.output]
+        self._out_names = [d.output, *(s.output for s in m.state)]
         self._argmax = d.rule == "argmax"
         self._col = d.column
         # argmax: the slip columns as an index array (max over them is the score) and
@@ -379,6 +408,14 @@ class StreamLoop:
             self._out_ort = ort.OrtValue.ortvalue_from_numpy(self._out)
             self._binding.bind_ortvalue_input(inp.name, self._in_ort)
             self._binding.bind_ortvalue_output(d.output, self._out_ort)
+            # Kept referenced: the binding reads and writes these buffers in place.
+            self._state_ort = []
+            for s, h_in, h_out in zip(m.state, self._h_in, self._h_out, strict=True):
+                v_in = ort.OrtValue.ortvalue_from_numpy(h_in)
+                v_out = ort.OrtValue.ortvalue_from_numpy(h_out)
+                self._binding.bind_ortvalue_input(s.input, v_in)
+                self._binding.bind_ortvalue_output(s.output, v_out)
+                self._state_ort += [v_in, v_out]
         # The warm-up stops early once it has taken the bundle's load deadline: it
         # only primes allocations, and a slow graph must not hold the start for
         # warmup x its call time.
@@ -403,6 +440,7 @@ class StreamLoop:
             self._hop == 1
             and not self.nan_is_missing
             and self._binding is not None
+            and not self._state  # step carries and resets the recurrent state
             and all(hasattr(op, "keeps_nonfinite") for op in self._ops)
         ):
             self.step = self._step_hop1  # type: ignore[method-assign]
@@ -430,6 +468,9 @@ class StreamLoop:
         self._skipped = 0
         self._nonfinite_windows = 0
         self._gaps = 0
+        for h in self._h_in:
+            h.fill(0)
+        self._state_resets = 0
         cap = self._capacity
         self._frame = np.zeros(cap, dtype=np.int64)
         self._ts = np.zeros(cap)
@@ -442,6 +483,13 @@ class StreamLoop:
     def window(self) -> NDArray[np.float64]:
         """A copy of the latest ``window`` frames, oldest first (zeros before they arrive)."""
         return self._windows[self._pos].copy()
+
+    def _zero_state(self) -> None:
+        """Set a recurrent state back to zeros (counted; nothing without state)."""
+        if self._state:
+            for h in self._h_in:
+                h.fill(0)
+            self._state_resets += 1
 
     def _call(self) -> NDArray[Any]:
         if self._binding is None:
@@ -549,7 +597,9 @@ class StreamLoop:
         Returns as :meth:`step` does.
         """
         if self._binding is None:
-            score = self._session.run(self._out_names, self._feed)[0]
+            score, *states = self._session.run(self._out_names, self._feed)
+            for (_, h_out), h in zip(self._h_pairs, states, strict=True):
+                np.copyto(h_out, h)
         else:
             self._session.run_with_iobinding(self._binding)
             score = self._out
@@ -579,6 +629,8 @@ class StreamLoop:
             above = s > self._thr if self._strict else s >= self._thr
             slip = above == self._slip_above
             cls = int(above) if self._has_classes else -1
+        for h_in, h_out in self._h_pairs:  # the next frame's state (none: no loop)
+            np.copyto(h_in, h_out)
         run = self._run = self._run + 1 if slip else 0
         declared = run >= self._k
         self._record(
@@ -770,6 +822,7 @@ class StreamLoop:
         if dt < 0.0:
             return bad or "time_order"
         self._gaps += 1
+        self._zero_state()
         if self._skip_gaps:
             # Windows holding the frames on both sides of the gap: the ones ending
             # here and at the next window - 2 frames.
@@ -780,8 +833,10 @@ class StreamLoop:
         self._skipped += 1
         self._nonfinite_windows += 1
         self._run = 0
+        self._zero_state()
 
     def _flag(self, seen: int, reason: str) -> None:
+        self._zero_state()
         self.n_bad += 1
         self._bad_frame.append(seen - 1)
         self._bad_reason.append(reason)
@@ -832,4 +887,5 @@ class StreamLoop:
             klass=self._klass[:n].copy(),
             classes=m.decision.classes,
             slip_classes=m.decision.slip_classes,
+            state_resets=self._state_resets,
         )
