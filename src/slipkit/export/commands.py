@@ -173,6 +173,16 @@ def _detector_parity(
             "DetectorGraph: its window and hop are unknown"
         )
     dep.frame["window"], dep.frame["hop"] = int(graph.window), int(graph.hop)
+    if getattr(graph, "state", ()):
+        # A recurrent step graph: the loop itself, frame by frame, per recording.
+        from slipkit.export.frame_gru import graph_parity
+
+        return graph_parity(
+            detector,
+            graph,
+            [t.frames for t in dep.trials],
+            rate_hz=float(dep.frame["rate_hz"]),
+        )
     X = np.concatenate([t.frames for t in dep.trials])
     segments = np.concatenate(
         [np.full(len(t.frames), k) for k, t in enumerate(dep.trials)]
@@ -305,6 +315,8 @@ def export_main(cfg: DictConfig) -> Path:
         "outputs": [{"name": graph.score_output}],
         "decision": decision,
         "threshold": threshold,
+        # a recurrent graph's state, carried by the loop (docs/deploy.md)
+        **({"state": list(graph.state)} if getattr(graph, "state", ()) else {}),
         "debounce": {"k": int(dep.debounce_k)},
         "budget_ms": budget,
         "opset": int(graph.opset),

@@ -248,12 +248,15 @@ def check_step_parity(
     Returns
     -------
     dict
-        ``{"recordings", "frames", "max_abs_diff", "decisions_equal", "tol", "ok"}``.
+        ``recordings``, ``frames`` (pushed), ``max_abs_diff``, ``decisions_equal``,
+        ``tol``, ``ok``, and in :func:`slipkit.export.commands`'s terms ``n_frames``
+        (scored frames), ``agreement``, ``n_disagree``, ``score_eps`` (= ``tol``),
+        ``disagreements_near_threshold`` and ``passed`` (= ``ok``).
     """
     from slipkit.runtime import StreamLoop, load_bundle
 
     loop = StreamLoop(load_bundle(bundle_path), capacity=4096)
-    worst, frames, same = 0.0, 0, True
+    worst, frames, same, scored_n, disagree = 0.0, 0, True, 0, 0
     for rec in recordings:
         x = np.asarray(rec, dtype=np.float64)
         want = detector.decision_function(x)
@@ -271,18 +274,52 @@ def check_step_parity(
         worst = max(worst, float(diff.max(initial=0.0)))
         # decisions may differ only where the score is within tol of the threshold
         close = np.abs(want[scored] - detector.threshold_) <= tol
-        same &= bool(
-            np.all((res.slip == (want[scored] >= detector.threshold_)) | close)
-        )
+        differ = res.slip != (want[scored] >= detector.threshold_)
+        same &= bool(np.all(~differ | close))
+        disagree += int(differ.sum())
+        scored_n += int(scored.sum())
         frames += len(x)
+    ok = worst <= tol and same
     return {
+        "n_frames": scored_n,
+        "agreement": 1.0 - disagree / max(scored_n, 1),
+        "n_disagree": disagree,
+        "score_eps": tol,
+        "disagreements_near_threshold": same,
+        "passed": ok,
         "recordings": len(recordings),
         "frames": frames,
         "max_abs_diff": worst,
         "decisions_equal": same,
         "tol": tol,
-        "ok": worst <= tol and same,
+        "ok": ok,
     }
+
+
+def graph_parity(
+    detector: FrameGRUDetector,
+    graph: StepGraph,
+    recordings: Sequence[NDArray[np.float64]],
+    *,
+    rate_hz: float,
+    tol: float = PARITY_TOL,
+) -> dict[str, Any]:
+    """:func:`check_step_parity` of ``graph`` in a temporary bundle (for ``slipkit export``)."""
+    import tempfile
+
+    from slipkit.runtime import write_bundle
+
+    c = int(detector.n_features_in_)
+    man = step_manifest(
+        graph,
+        name="parity",
+        stream="parity",
+        channels=[f"c{i}" for i in range(c)],
+        rate_hz=rate_hz,
+    )
+    with tempfile.TemporaryDirectory(prefix="slipkit-gru-parity-") as tmp:
+        path = write_bundle(Path(tmp) / "bundle", graph.serialize(), man)
+        return check_step_parity(path, detector, recordings, rate_hz=rate_hz, tol=tol)
 
 
 def write_frame_gru_bundle(
