@@ -173,10 +173,10 @@ def _detector_parity(
             "DetectorGraph: its window and hop are unknown"
         )
     dep.frame["window"], dep.frame["hop"] = int(graph.window), int(graph.hop)
-    if getattr(graph, "state", ()):
-        # A recurrent step graph: the loop itself, frame by frame, per recording.
-        from slipkit.export.frame_gru import graph_parity
+    from slipkit.export.frame_gru import StepGraph, graph_parity
 
+    if isinstance(graph, StepGraph):
+        # A recurrent step graph: the loop itself, frame by frame, per recording.
         return graph_parity(
             detector,
             graph,
@@ -199,6 +199,7 @@ def export_main(cfg: DictConfig) -> Path:
     from slipkit.export import export  # registers the built-in exporters
     from slipkit.export import force as _force  # noqa: F401  (registers force exporters)
     from slipkit.export.deploy import deployment, held_out_inputs
+    from slipkit.export.frame_gru import StepGraph
     from slipkit.export.parity import check_parity
     from slipkit.runtime import choose_session, load_bundle, write_bundle
     from slipkit.train.commands import build
@@ -316,7 +317,7 @@ def export_main(cfg: DictConfig) -> Path:
         "decision": decision,
         "threshold": threshold,
         # a recurrent graph's state, carried by the loop (docs/deploy.md)
-        **({"state": list(graph.state)} if getattr(graph, "state", ()) else {}),
+        **({"state": list(graph.state)} if isinstance(graph, StepGraph) else {}),
         "debounce": {"k": int(dep.debounce_k)},
         "budget_ms": budget,
         "opset": int(graph.opset),

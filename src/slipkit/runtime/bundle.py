@@ -468,7 +468,7 @@ def _state(
         )
     if len(value) > MAX_STATE:
         raise top.error("state", f"lists {len(value)} tensors; at most {MAX_STATE}")
-    specs = []
+    specs: list[StateSpec] = []
     for i, item in enumerate(value):
         f = Fields(top.file, item, f"state[{i}]")
         f.only(("input", "output", "shape", "dtype"))
