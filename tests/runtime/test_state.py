@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import tracemalloc
 from pathlib import Path
 from typing import Any
@@ -12,6 +13,7 @@ from onnx import TensorProto, helper, numpy_helper
 from tests.runtime.helpers import RATE_HZ, edit_manifest, manifest
 
 from slipkit.runtime import BundleError, StreamLoop, load_bundle, write_bundle
+from slipkit.runtime.cli import run
 from slipkit.runtime.realtime import frozen_gc
 
 N_IN = 3
@@ -67,7 +69,15 @@ class StepCase:
                 "dtype": "float32",
             }
         ]
-        self.path = write_bundle(root / "step", step_graph(self.w, self.u, self.v), man)
+        # a replay with a NaN frame (index 30) for slipkit-run
+        replay = np.random.default_rng(seed + 9).normal(size=(60, N_IN))
+        replay[30, 0] = np.nan
+        self.path = write_bundle(
+            root / "step",
+            step_graph(self.w, self.u, self.v),
+            man,
+            replay=(replay, np.arange(60) / RATE_HZ),
+        )
 
     def scores(self, frames: np.ndarray) -> np.ndarray:
         """The recurrence from a zero state over ``frames``, in float64."""
@@ -208,3 +218,16 @@ def test_steady_state_steps_keep_no_memory(case: StepCase) -> None:
     # as tests/runtime/test_realtime.py: onnxruntime keeps 2-5 KiB of its own; one
     # array kept per frame would be >= 100 KB
     assert current - start < 8192
+
+
+def test_cli_json_counts_state_resets(case: StepCase, tmp_path: Path) -> None:
+    """slipkit-run --json reports the state resets: one for the replay's NaN frame."""
+    out = tmp_path / "out.json"
+    status = run([str(case.path), "--json", str(out)])
+    summary = json.loads(out.read_text())
+    assert (0, 1, 1, 59) == (
+        status,
+        summary["bad_frames"],
+        summary["state_resets"],
+        summary["decisions"],
+    )
