@@ -102,3 +102,29 @@ def test_parity_holds_across_a_nan_frame(
     )
     again = check_step_parity(tmp_path / "gru", fitted, [X], rate_hz=RATE_HZ)
     assert (True, True, len(X)) == (out["ok"], again["ok"], again["frames"])
+
+
+def test_stateful_replay_leaves_a_gap_between_trials() -> None:
+    """replay(gap_periods=10) starts each trial 10 frame periods after the last; the default joins them."""
+    import numpy as np
+
+    from slipkit.export.deploy import Deployment, HeldOutTrial
+
+    trials = [
+        HeldOutTrial(f"t{i}", np.zeros((3, 2)), np.arange(3) / 100.0 + 5.0 * i)
+        for i in range(2)
+    ]
+    dep = Deployment(
+        frame={"rate_hz": 100.0},
+        preprocessing=[],
+        export_options={},
+        positive=None,
+        debounce_k=1,
+        trials=trials,
+    )
+    _, joined = dep.replay()
+    _, gapped = dep.replay(gap_periods=10.0)
+    assert [0.01, 0.10] == [
+        round(float(joined[3] - joined[2]), 9),
+        round(float(gapped[3] - gapped[2]), 9),
+    ]

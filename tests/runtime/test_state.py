@@ -201,7 +201,7 @@ def test_stateful_loop_takes_the_full_step(case: StepCase) -> None:
 
 
 def test_steady_state_steps_keep_no_memory(case: StepCase) -> None:
-    """Carrying the state allocates nothing per frame: 1000 warm steps keep under 8 KiB."""
+    """Carrying the state allocates nothing per frame: 1000 warm steps keep under 32 KiB."""
     loop = StreamLoop(load_bundle(case.path), capacity=1 << 12)
     frames = [np.array(f) for f in _frames(1200)]
     for i in range(200):
@@ -215,9 +215,11 @@ def test_steady_state_steps_keep_no_memory(case: StepCase) -> None:
             current, _ = tracemalloc.get_traced_memory()
         finally:
             tracemalloc.stop()
-    # as tests/runtime/test_realtime.py: onnxruntime keeps 2-5 KiB of its own; one
-    # array kept per frame would be >= 100 KB
-    assert current - start < 8192
+    # onnxruntime keeps a few KiB of its own bookkeeping (2-5 KiB in
+    # tests/runtime/test_realtime.py; once over 8 KiB here, not reproduced), so the
+    # bound is 32 KiB: one array kept per frame (>= ~150 bytes with its header) would
+    # be >= 150 KB over these 1000 steps.
+    assert current - start < 32768
 
 
 def test_cli_json_counts_state_resets(case: StepCase, tmp_path: Path) -> None:

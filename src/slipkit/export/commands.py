@@ -277,7 +277,11 @@ def export_main(cfg: DictConfig) -> Path:
         None if cfg.get("replay_max_frames") is None else int(cfg.replay_max_frames)
     )
     replay_trials = dep.replay_trials(replay_max)
-    frames, times = dep.replay(replay_max)
+    # A recurrent bundle's replay leaves a gap between trials: the loop resets its
+    # state there (docs/deploy.md, "Recurrent state"), so each trial starts fresh.
+    frames, times = dep.replay(
+        replay_max, gap_periods=10.0 if isinstance(graph, StepGraph) else 1.0
+    )
     replay_by_class: dict[str, int] = {}
     for tr in replay_trials:
         if tr.label is not None:

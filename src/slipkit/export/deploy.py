@@ -240,20 +240,24 @@ class Deployment:
         return [self.trials[i] for i in sorted(chosen)]
 
     def replay(
-        self, max_frames: int | None = None
+        self, max_frames: int | None = None, *, gap_periods: float = 1.0
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The replay trials (:meth:`replay_trials`) end to end: frames and timestamps (s).
 
-        Each trial's clock is shifted to start one frame period after the previous
-        trial's last frame.
+        Each trial's clock is shifted to start ``gap_periods`` frame periods after the
+        previous trial's last frame: 1 (the default) joins them seamlessly; more than
+        the loop's ``max_gap_periods`` (1.5) leaves a gap at every trial boundary, so
+        a stateful bundle's loop starts each trial from zero state, as its parity
+        check and the batch detector do.
         """
         period = 1.0 / float(self.frame["rate_hz"])
+        step = float(gap_periods) * period
         frames, times, start = [], [], 0.0
         for tr in self.replay_trials(max_frames):
             t = tr.timestamps - tr.timestamps[0] + start
             frames.append(tr.frames)
             times.append(t)
-            start = float(t[-1]) + period if len(t) else start
+            start = float(t[-1]) + step if len(t) else start
         f = np.concatenate(frames) if frames else np.zeros((0, *self.frame_shape))
         ts = np.concatenate(times) if times else np.zeros(0)
         return f, ts
