@@ -12,9 +12,9 @@ the linear head. It is traced from a small torch module by ``torch.onnx.export``
 The bundle's manifest carries the ``state`` section (``h_in`` -> ``h_out``, zeros at
 the start), so :class:`~slipkit.runtime.loop.StreamLoop` feeds the state back frame
 by frame and zeros it on a gap or a bad frame (``docs/deploy.md``, "Recurrent
-state"). :func:`write_frame_gru_bundle` writes such a bundle and checks parity by
-running it through the loop over held-out recordings frame by frame against the
-detector's batch scores (:func:`check_step_parity`).
+state"). :func:`write_frame_gru_bundle` checks parity by running the graph through the
+loop over held-out recordings frame by frame against the detector's batch scores
+(:func:`check_step_parity`, on a temporary bundle), then writes the bundle.
 """
 
 from __future__ import annotations
@@ -334,10 +334,11 @@ def write_frame_gru_bundle(
     overwrite: bool = False,
     **manifest_options: Any,
 ) -> dict[str, Any]:
-    """Export ``detector``, write the bundle and check parity on ``held_out`` recordings.
+    """Export ``detector``, check parity on ``held_out`` recordings, write the bundle.
 
-    No bundle is left at ``out`` when parity fails (it is written to a sibling
-    first and only renamed into place once the loop matches the detector).
+    Parity runs on a temporary bundle (:func:`graph_parity`, in the system's temp
+    folder), so nothing is written beside ``out`` and no bundle is left at ``out``
+    when parity fails.
 
     Returns
     -------
@@ -349,11 +350,16 @@ def write_frame_gru_bundle(
     ExportError
         Parity failed (the message gives the largest difference).
     """
-    import shutil
-
     from slipkit.runtime import write_bundle
 
     graph = export_frame_gru(detector)
+    parity = graph_parity(detector, graph, held_out, rate_hz=rate_hz)
+    if not parity["ok"]:
+        raise ExportError(
+            f"frame GRU bundle parity failed: max |loop - batch| score "
+            f"{parity['max_abs_diff']:.3g} (tol {parity['tol']:g}), decisions "
+            f"equal: {parity['decisions_equal']}"
+        )
     man = step_manifest(
         graph,
         name=name,
@@ -362,21 +368,7 @@ def write_frame_gru_bundle(
         rate_hz=rate_hz,
         **manifest_options,
     )
+    man["training"] = {**man["training"], "parity": parity}
     target = Path(out)
-    trial = target.with_name(f".{target.name}.parity")
-    if trial.exists():
-        shutil.rmtree(trial)
-    write_bundle(trial, graph.serialize(), man)
-    try:
-        parity = check_step_parity(trial, detector, held_out, rate_hz=rate_hz)
-        if not parity["ok"]:
-            raise ExportError(
-                f"frame GRU bundle parity failed: max |loop - batch| score "
-                f"{parity['max_abs_diff']:.3g} (tol {parity['tol']:g}), decisions "
-                f"equal: {parity['decisions_equal']}"
-            )
-        man["training"] = {**man["training"], "parity": parity}
-        write_bundle(target, graph.serialize(), man, overwrite=overwrite)
-    finally:
-        shutil.rmtree(trial, ignore_errors=True)
+    write_bundle(target, graph.serialize(), man, overwrite=overwrite)
     return {**parity, "path": str(target)}
