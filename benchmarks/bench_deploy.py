@@ -7,12 +7,16 @@ measured), then measures in one process, batch 1, one thread, rounds interleaved
 * **loop**: :class:`slipkit.runtime.StreamLoop` on the bundle's replay frames, frame
   arrival to decision (ring buffer + preprocessing + onnxruntime + rule + debounce);
 * **bare**: one ``run_with_iobinding`` call on precomputed graph inputs (the loop's
-  own call path);
+  own call path; for a step graph with a recurrent ``state``, the frame GRU, the state
+  buffers are bound too and carried ``h_out -> h_in`` after each call, as the loop
+  does: ``_bound_state``);
 * **native**: the Python estimator's score method (sklearn / skorch / torch) on one
   frame's model input (for TacTip: the numpy pin-velocity features, then
-  ``decision_function``);
+  ``decision_function``; for the frame GRU: its numpy ``stream().update``, one GRU
+  step with the state carried);
 * **floor**: the best of onnxruntime's per-call floor (an Identity graph of the same
-  input) + the graph's FLOPs at this CPU's measured single-thread numpy matmul rate,
+  input) + the graph's FLOPs at this CPU's measured single-thread numpy matmul rate
+  (a step graph's by ``step_graph_flops``, which adds the GRU's head),
   and, for the TacTip SVM, hand-written numpy matrix products on the features.
 
 Prints a markdown table (us per frame, medians over rounds of each round's
@@ -138,6 +142,15 @@ RUNS: dict[str, tuple[list[str], float | None, str]] = {
         ],
         None,
         "",
+    ),
+    # A step graph with a recurrent state (frame + h_in -> score + h_out): the bare
+    # call binds the state too (_bound_state), native is the detector's own per-frame
+    # numpy stream (_state_scorers), the floor counts the head too (step_graph_flops).
+    # Fewer trials and epochs than the experiment's 40 / 40: a quick run to time.
+    "frame_gru": (
+        ["experiment=biotac_slip_gru", "dataset.n_trials=12", "model.epochs=10"],
+        None,
+        "BioTac frame GRU (one step per 300 Hz frame, state carried)",
     ),
 }
 
@@ -265,6 +278,113 @@ def _bound(sess: Any, in_name: str, out_name: str, shape: list[int]) -> Any:
     return call
 
 
+def _bound_state(
+    sess: Any, in_name: str, out_name: str, shape: list[int], state: Any
+) -> Any:
+    """The bare call of a step graph: :func:`_bound` with the recurrent state bound too.
+
+    Each ``state`` entry (:class:`slipkit.runtime.bundle.StateSpec`) gets a
+    preallocated input and output buffer bound once, as ``StreamLoop`` does; after
+    every call the output is copied into the input, so the state is *carried*
+    ``h_out -> h_in`` from one frame to the next (the loop's own per-frame work; a
+    fixed state would leave the copy out). Starts from zeros and carries on across
+    the frames it is given (the loop also zeroes it at a replay's trial gaps: once per
+    trial, not per frame, so left out).
+
+    Returns
+    -------
+    callable
+        ``x -> out``: writes one input frame, runs the session through IOBinding,
+        carries the state and returns the score output buffer (the same array every
+        call, shape of the graph's score output).
+    """
+    import onnxruntime as ort
+
+    dtype = np.float64 if sess.get_inputs()[0].type == "tensor(double)" else np.float32
+    xb = np.zeros(shape, dtype)
+    h_in = [np.zeros(s.shape, np.dtype(s.dtype)) for s in state]
+    h_out = [np.zeros_like(h) for h in h_in]
+    feed = {in_name: xb, **{s.input: h for s, h in zip(state, h_in, strict=True)}}
+    ob = np.zeros_like(np.asarray(sess.run([out_name], feed)[0]))
+    binding = sess.io_binding()
+    keep = [  # referenced for the binding's lifetime: it reads and writes them in place
+        ort.OrtValue.ortvalue_from_numpy(a) for a in (xb, ob, *h_in, *h_out)
+    ]
+    binding.bind_ortvalue_input(in_name, keep[0])
+    binding.bind_ortvalue_output(out_name, keep[1])
+    for i, s in enumerate(state):
+        binding.bind_ortvalue_input(s.input, keep[2 + i])
+        binding.bind_ortvalue_output(s.output, keep[2 + len(state) + i])
+    pairs = tuple(zip(h_in, h_out, strict=True))
+
+    def call(x: np.ndarray) -> np.ndarray:
+        xb[0] = x
+        sess.run_with_iobinding(binding)
+        for h, h_next in pairs:
+            np.copyto(h, h_next)
+        return ob
+
+    call.keep = keep  # type: ignore[attr-defined]
+    return call
+
+
+def _state_scorers(model: Any) -> tuple[Any, Any, Any]:
+    """Native and torch-eager per-frame scorers of a recurrent (step-graph) detector.
+
+    native: ``model.stream().update`` (for ``FrameGRUDetector``, ``GRUStream``: numpy
+    float64, one GRU step on the standardised frame, state carried in the stream);
+    the estimator's own per-frame path. torch: the module ``torch.onnx`` traced for the
+    export (``slipkit.export.frame_gru._step_module``, standardisation folded), eager,
+    state carried. Returns ``(native, eager, module)``.
+    """
+    import torch
+
+    from slipkit.export.frame_gru import _step_module
+
+    stream = model.stream()
+    module = _step_module(model).eval()
+    h = [torch.zeros(1, int(model.hidden), dtype=torch.float64)]
+
+    def native(x: np.ndarray) -> None:
+        stream.update(x)
+
+    def eager(x: np.ndarray) -> None:
+        with torch.no_grad():
+            h[0] = module(torch.from_numpy(x[None]), h[0])[1]
+
+    return native, eager, module
+
+
+def step_graph_flops(model_bytes: bytes) -> int:
+    """FLOPs of one call of a step graph, batch 1: :func:`graph_flops` plus what it leaves out.
+
+    :func:`graph_flops` counts the Gemm / MatMul products with a constant 2-D weight,
+    which in the frame GRU's graph are the input and recurrent projections
+    (``2 x 3H x I`` and ``2 x 3H x H``). Added here: a MatMul with a constant 1-D weight
+    (the GRU's linear head ``h . w_out``, 2 H) and, should a graph use onnxruntime's
+    ``GRU`` op, each such node's ``2 x (W.size + R.size)`` per step, i.e.
+    ``2 x 3 x H x (I + H)`` per direction (W: ``(D, 3H, I)``, R: ``(D, 3H, H)``; a step
+    graph runs one step). Element-wise gate ops are ignored, as in every row.
+    """
+    import onnx
+    from onnx import numpy_helper
+
+    m = onnx.load_from_string(model_bytes)
+    shapes = {t.name: numpy_helper.to_array(t).shape for t in m.graph.initializer}
+    flops = graph_flops(model_bytes, None)
+    for node in m.graph.node:
+        if node.op_type == "MatMul":
+            shp = shapes.get(node.input[1])
+            if shp is not None and len(shp) == 1:
+                flops += 2 * int(shp[0])
+        elif node.op_type == "GRU":
+            for w in node.input[1:3]:
+                shp = shapes.get(w)
+                if shp is not None:
+                    flops += 2 * int(np.prod(shp))
+    return flops
+
+
 def profile_nodes(
     model_path: Path, options: Any, inputs: np.ndarray, top: int = 6
 ) -> list[str]:
@@ -285,8 +405,15 @@ def profile_nodes(
             str(model_path), options, providers=["CPUExecutionProvider"]
         )
         name = sess.get_inputs()[0].name
+        # a step graph's state inputs (zeros: the profile is of one call's nodes)
+        zeros = {
+            i.name: np.zeros(
+                [d if isinstance(d, int) else 1 for d in i.shape], inputs.dtype
+            )
+            for i in sess.get_inputs()[1:]
+        }
         for x in inputs:
-            sess.run(None, {name: x[None]})
+            sess.run(None, {name: x[None], **zeros})
         events = _json.loads(Path(sess.end_profiling()).read_text())
     per: dict[tuple[str, str], list[int]] = collections.defaultdict(list)
     for e in events:
@@ -412,7 +539,12 @@ def main() -> None:
         # so the bare call's input write is a plain copy, as the loop's
         x32 = inputs.astype(inp.dtype)
         loop = StreamLoop(bundle)
-        bare = _bound(bundle.session, inp.name, m.decision.output, [1, *in_shape])
+        if m.state:  # a step graph: the state bound and carried too
+            bare = _bound_state(
+                bundle.session, inp.name, m.decision.output, [1, *in_shape], m.state
+            )
+        else:
+            bare = _bound(bundle.session, inp.name, m.decision.output, [1, *in_shape])
         detector = hasattr(graph, "first_decision")
         if detector:
             # native: the batch detector's decision_function on one window (its
@@ -440,6 +572,10 @@ def main() -> None:
                 with torch.no_grad():
                     mod(torch.from_numpy(x[None]))
 
+        if m.state:
+            # a recurrent detector: one frame with its state carried (the window
+            # decision_function above would restart from zeros every call)
+            native, eager, module = _state_scorers(model)
         part: dict[str, list[tuple[float, float]]] = {
             k: [] for k in ("bare", "native", "identity")
         }
@@ -519,6 +655,8 @@ def main() -> None:
         flops = graph_flops(
             graph.serialize(), getattr(model, "flops_per_window_", None)
         )
+        if m.state:
+            flops = step_graph_flops(graph.serialize())
         floor = med["identity"][0] + flops / rate * 1e6
         if "numpy" in med:
             floor = min(floor, med["numpy"][0])
