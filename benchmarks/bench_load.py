@@ -2,16 +2,18 @@
 
 Run: ``.venv/bin/python benchmarks/bench_load.py [--frames 6000] [--core 0] [--keep DIR]
 [--competitors all|N]
-[--families tactip,fsr,biotac,sliptack,sliptack_full,davis]``.
+[--families tactip,fsr,biotac,sliptack,sliptack_full,davis]`` (``sliptack_inc`` on request).
 
 1. Small bundles are made in a temp folder (or ``--keep``) with ``slipkit train``'s and
    ``slipkit export``'s own functions (:mod:`slipkit.closedloop.commands`: few trials,
    ``choose_session=false``): ``tactip`` (``experiment=tactip_svm``), ``fsr``
    (``fsr_roc``), ``biotac`` (``biotac_force``: the force regressor, slip where a force exceeds 0 N), ``sliptack`` (``sliptack_speed``,
-   the 1000-sample window, speed >= 10 mm/s, ``regression.incremental=true``: the
-   spectrum per hop by the runtime op ``sliding_spectrum``) and ``sliptack_full`` (the
-   same run with the default ``regression.incremental=false``: the whole-window
-   graph), ``davis``
+   the 1000-sample window, speed >= 10 mm/s, the export's default
+   ``regression.prepare=true``: the spectrum prepared on the frame before each
+   decision by ``prepare.onnx``), ``sliptack_full`` (the same run with
+   ``regression.prepare=false``: the whole-window graph on the decision frame),
+   ``sliptack_inc`` (``regression.incremental=true``: the spectrum per hop by the
+   runtime op ``sliding_spectrum``; not in the default list), ``davis``
    (``davis_release``, the ``davis_areas`` op).
 2. Each bundle's ``replay.npz`` (its first ``--frames`` frames, unpaced) runs through
    ``slipkit-run`` in a fresh process under four conditions, in this order per bundle:
@@ -25,11 +27,12 @@ Run: ``.venv/bin/python benchmarks/bench_load.py [--frames 6000] [--core 0] [--k
    competitor and outranks it.
 3. Prints one row per bundle and condition: decisions, p50 / p99 / max latency (ms,
    frame arrival to decision) against the bundle's p99 budget (10 % of its frame
-   period), decisions over the budget, and whether p99 is within it; then any
+   period), decisions over the budget, the p99 of the frames that ran a prepare
+   graph (``-`` without one), and whether both p99s are within it; then any
    real-time note (e.g. SCHED_FIFO not permitted).
-4. With both SlipTack bundles: the two side by side in this process, rounds
-   interleaved, the loop latency split into the numpy preprocessing and the graph
-   call (:func:`sliptack_pair`).
+4. With two or more SlipTack bundles: side by side in this process, rounds
+   interleaved, the loop latency split into the preprocessing (numpy op, or the
+   prepare graph on the frame before) and the graph call (:func:`sliptack_pair`).
 
 The machine is shared (other jobs run on its cores too), so "quiet" is the machine as
 it is; the difference between rows of one bundle is the point.
@@ -55,15 +58,22 @@ FAMILIES: dict[str, tuple[str, list[str], list[str]]] = {
     "sliptack": (
         "sliptack",
         ["experiment=sliptack_speed", "dataset.n_trials=6"],
-        ["regression.threshold=10.0", "regression.incremental=true"],
+        ["regression.threshold=10.0", "regression.prepare=true"],
     ),
     "sliptack_full": (
         "sliptack",
         ["experiment=sliptack_speed", "dataset.n_trials=6"],
-        ["regression.threshold=10.0", "regression.incremental=false"],
+        ["regression.threshold=10.0", "regression.prepare=false"],
     ),
     "davis": ("davis", ["experiment=davis_release", "dataset.n_trials=6"], []),
+    "sliptack_inc": (
+        "sliptack",
+        ["experiment=sliptack_speed", "dataset.n_trials=6"],
+        ["regression.threshold=10.0", "regression.incremental=true"],
+    ),
 }
+#: The families run without --families.
+DEFAULT_FAMILIES = ("tactip", "fsr", "biotac", "sliptack", "sliptack_full", "davis")
 
 BUSY = "import os, sys; os.sched_setaffinity(0, {int(sys.argv[1])})\nwhile True: pass"
 
@@ -173,7 +183,7 @@ def main() -> None:
     ap.add_argument(
         "--keep", type=Path, help="make (or reuse) the bundles in this folder"
     )
-    ap.add_argument("--families", default=",".join(FAMILIES))
+    ap.add_argument("--families", default=",".join(DEFAULT_FAMILIES))
     ap.add_argument(
         "--competitors",
         default="all",
@@ -207,7 +217,7 @@ def main() -> None:
         )
         head = (
             f"| {'bundle':13s} | budget | load  | options | decisions | p50    | p99    "
-            f"| max    | over budget | p99 within |"
+            f"| max    | over budget | prepare p99 | p99 within |"
         )
         print(head)
         print("|" + "|".join("-" * (len(c)) for c in head.split("|")[1:-1]) + "|")
@@ -220,18 +230,22 @@ def main() -> None:
                     )
                     lat = s["latency_ms"] or {}
                     notes.update(s["notes"])
+                    prep = (s.get("prepare") or {}).get("latency_ms")
+                    prep_p99 = "-" if prep is None else f"{prep['p99']:.4f}"
                     print(
                         f"| {name:13s} | {s['budget_ms']['p99']:.4f} "
                         f"| {'load' if load else 'quiet':5s} | {'on' if options else 'off':7s} "
                         f"| {s['decisions']:9d} | {lat.get('p50', float('nan')):.4f} "
                         f"| {lat.get('p99', float('nan')):.4f} | {lat.get('max', float('nan')):.4f} "
-                        f"| {s['over_budget']:11d} | {'yes' if s['within_budget'] else 'NO':10s} |",
+                        f"| {s['over_budget']:11d} | {prep_p99:11s} "
+                        f"| {'yes' if s['within_budget'] else 'NO':10s} |",
                         flush=True,
                     )
         for note in sorted(notes):
             print(note)
-        if {"sliptack", "sliptack_full"} <= set(names):
-            sliptack_pair(bundles["sliptack"], bundles["sliptack_full"], args.rounds)
+        pair = [n for n in ("sliptack", "sliptack_full", "sliptack_inc") if n in names]
+        if len(pair) >= 2:
+            sliptack_pair({n: bundles[n] for n in pair}, args.rounds)
 
 
 def _pct(ns: list[int]) -> str:
@@ -241,13 +255,15 @@ def _pct(ns: list[int]) -> str:
     return f"{np.percentile(a, 50):8.1f} {np.percentile(a, 99):8.1f}"
 
 
-def sliptack_pair(inc: Path, full: Path, rounds: int) -> None:
-    """SlipTack's incremental and whole-window bundles side by side in this process.
+def sliptack_pair(paths: dict[str, Path], rounds: int) -> None:
+    """SlipTack bundles side by side in this process (prepared, whole-window, incremental).
 
-    Rounds interleaved (incremental, then whole-window, ``rounds`` times) over the
-    same replay frames, numpy's OpenBLAS on one thread (as ``--pin-threads``); per decision: the loop (frame arrival -> decision), and its
-    parts timed on the same windows: the numpy preprocessing alone and the graph call
-    alone (``session.run`` on the precomputed input). us, pooled over rounds.
+    Rounds interleaved (each bundle in turn, ``rounds`` times) over the same replay
+    frames, numpy's OpenBLAS on one thread (as ``--pin-threads``); per decision: the
+    loop (frame arrival -> decision), and its parts timed on the same windows: the
+    preprocessing alone (the numpy op; for a prepared bundle its prepare graph on the
+    window one frame earlier, the work of the frame before the decision) and the graph
+    call alone (``session.run`` on the precomputed inputs). us, pooled over rounds.
     """
     import numpy as np
 
@@ -255,14 +271,14 @@ def sliptack_pair(inc: Path, full: Path, rounds: int) -> None:
     from slipkit.runtime.realtime import blas_threads
 
     blas_threads(1)  # as --pin-threads: numpy's BLAS on one thread
-    b_inc, b_full = load_bundle(inc), load_bundle(full)
-    rep = np.load(inc / "replay.npz")
+    loaded = {k: load_bundle(p) for k, p in paths.items()}
+    rep = np.load(next(iter(paths.values())) / "replay.npz")
     frames, times = rep["frames"], rep["timestamps"]
     res: dict[str, dict[str, list[int]]] = {
-        k: {"loop": [], "prep": [], "graph": []} for k in ("incremental", "whole")
+        k: {"loop": [], "prep": [], "graph": []} for k in loaded
     }
     for _ in range(rounds):
-        for key, b in (("incremental", b_inc), ("whole", b_full)):
+        for key, b in loaded.items():
             loop = StreamLoop(b)
             r = loop.run(ReplaySource(frames, times))
             res[key]["loop"] += r.latency_ns.tolist()
@@ -272,12 +288,23 @@ def sliptack_pair(inc: Path, full: Path, rounds: int) -> None:
             for op in pipe.ops:
                 getattr(op, "reset", lambda: None)()
             name, out = inp.name, b.manifest.decision.output
+            tensor = b.manifest.prepare
             for end in range(w - 1, len(frames), hop):
                 x = np.asarray(frames[end - w + 1 : end + 1], dtype=np.float64)
                 t0 = time.perf_counter_ns()
                 y = pipe(x)
                 t1 = time.perf_counter_ns()
                 feed = {name: np.asarray(y, dtype=np.float32).reshape(inp.shape)}
+                if tensor is not None and b.prepare_session is not None:
+                    # the window one frame earlier (its oldest row: a zero before the
+                    # stream, dropped by the graph)
+                    lo = max(end - w, 0)
+                    prev = np.zeros((w, *x.shape[1:]), dtype=np.float32)
+                    prev[w - (end - lo) :] = frames[lo:end]
+                    t0 = time.perf_counter_ns()
+                    part = b.prepare_session.run([tensor], {name: prev[None]})[0]
+                    t1 = time.perf_counter_ns()
+                    feed[tensor] = part
                 t2 = time.perf_counter_ns()
                 b.session.run([out], feed)
                 t3 = time.perf_counter_ns()
@@ -287,9 +314,9 @@ def sliptack_pair(inc: Path, full: Path, rounds: int) -> None:
         f"SlipTack side by side ({rounds} rounds interleaved, {len(frames)} replay "
         "frames; us, p50 p99; budget 100 us)"
     )
-    print(f"{'graph':12s} {'loop':>17s} {'numpy prep':>17s} {'graph call':>17s}")
+    print(f"{'bundle':13s} {'loop':>17s} {'prep (op/graph)':>17s} {'graph call':>17s}")
     for key, r in res.items():
-        print(f"{key:12s} {_pct(r['loop'])} {_pct(r['prep'])} {_pct(r['graph'])}")
+        print(f"{key:13s} {_pct(r['loop'])} {_pct(r['prep'])} {_pct(r['graph'])}")
 
 
 if __name__ == "__main__":

@@ -61,12 +61,14 @@ class GraphBuilder:
         inputs: list[onnx.ValueInfoProto],
         outputs: list[onnx.ValueInfoProto],
         doc: str = "",
+        extra_inputs: tuple[str, ...] = (),
     ) -> onnx.ModelProto:
-        """The model, stamped and checked by :func:`finalize_model`."""
+        """The model, stamped and checked by :func:`finalize_model` (``extra_inputs``:
+        inputs besides the frame input, as there)."""
         graph = helper.make_graph(
             self.nodes, self.name, inputs, outputs, self.initializers, doc_string=doc
         )
         model = helper.make_model(
             graph, opset_imports=[helper.make_opsetid("", self.opset)]
         )
-        return finalize_model(model)
+        return finalize_model(model, extra_inputs)

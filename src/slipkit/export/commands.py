@@ -322,6 +322,12 @@ def export_main(cfg: DictConfig) -> Path:
         "threshold": threshold,
         # a recurrent graph's state, carried by the loop (docs/deploy.md)
         **({"state": list(graph.state)} if isinstance(graph, StepGraph) else {}),
+        # a prepare graph run on the frame before each decision (docs/deploy.md)
+        **(
+            {"prepare": {"tensor": graph.prepare_tensor}}
+            if getattr(graph, "prepare", None) is not None
+            else {}
+        ),
         "debounce": {"k": int(dep.debounce_k)},
         "budget_ms": budget,
         "opset": int(graph.opset),
@@ -359,12 +365,21 @@ def export_main(cfg: DictConfig) -> Path:
     if threshold is None:
         manifest.pop("threshold")
     model_bytes = graph.serialize()
+    prepare_bytes = (
+        graph.serialize_prepare()
+        if getattr(graph, "prepare", None) is not None
+        else None
+    )
     session_note = "defaults"
     if bool(cfg.get("choose_session", True)):
         sess_cfg = cfg.get("session") or {}
         with tempfile.TemporaryDirectory(prefix="slipkit-export-") as tmp:
             probe = write_bundle(
-                Path(tmp) / "bundle", model_bytes, manifest, replay=(frames, times)
+                Path(tmp) / "bundle",
+                model_bytes,
+                manifest,
+                replay=(frames, times),
+                prepare=prepare_bytes,
             )
             rows = choose_session(
                 load_bundle(probe),
@@ -385,6 +400,7 @@ def export_main(cfg: DictConfig) -> Path:
         manifest,
         replay=(frames, times),
         overwrite=bool(cfg.get("overwrite", False)),
+        prepare=prepare_bytes,
     )
     print(
         f"{name}: {type(model).__name__} ({type(task).__name__}) -> ONNX opset "

@@ -1027,6 +1027,14 @@ def _deploy_sliptack_speed(
             steps = [sliding_spectrum_step(est)]
             export_options = {"incremental": True}
             holds += "; spectrum per hop by the runtime op sliding_spectrum"
+        elif reg.get("prepare", True) and int(est.window) >= 2:
+            # regression.prepare (default): steps 1-2 on the frame before each
+            # decision by prepare.onnx, the decision frame adding its sample's share
+            export_options = {"prepare": True}
+            holds += (
+                f"; whole-window spectrum ({why}) prepared on the frame before each "
+                "decision (prepare.onnx; regression.prepare=true)"
+            )
         else:
             holds += f"; whole-window spectrum per call ({why})"
     split = run_metrics(run).get("split", {})

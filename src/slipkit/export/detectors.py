@@ -142,6 +142,37 @@ class DetectorGraph(ExportedGraph):
     first_decision: int = 0
     strict: bool = False
     preprocessing: tuple[dict[str, Any], ...] = ()
+    prepare: onnx.ModelProto | None = None
+    prepare_tensor: str = ""
+
+    def serialize_prepare(self) -> bytes | None:
+        """The prepare graph's ONNX bytes (None without one)."""
+        return None if self.prepare is None else bytes(self.prepare.SerializeToString())
+
+    def prepare_session(self) -> Any:
+        """An onnxruntime session of the prepare graph (CPU, one thread)."""
+        assert self.prepare is not None
+        return onnx_session(replace(self, model=self.prepare, prepare=None))
+
+    def run_windows(
+        self, session: Any, windows: NDArray[Any], prepare_session: Any = None
+    ) -> NDArray[Any]:
+        """The score output on a batch of graph inputs ``windows`` (as the runtime calls it).
+
+        With a ``prepare`` graph, each call's prepared tensor comes from the window one
+        sample earlier (the window less its newest sample, behind a row the prepare
+        graph drops), as the runtime runs it on the frame before a decision.
+        ``prepare_session``: reuse a session of the prepare graph (else CPU, one thread).
+        """
+        feed = {self.input_name: windows}
+        if self.prepare is not None:
+            if prepare_session is None:
+                prepare_session = self.prepare_session()
+            earlier = np.concatenate([windows[:, :1], windows[:, :-1]], axis=1)
+            feed[self.prepare_tensor] = prepare_session.run(
+                [self.prepare_tensor], {self.input_name: earlier}
+            )[0]
+        return np.asarray(session.run([self.score_output], feed)[0])
 
     def describe(self) -> dict[str, Any]:
         """The registry's description plus ``frame`` (window, hop, first_decision)
@@ -153,6 +184,8 @@ class DetectorGraph(ExportedGraph):
             "first_decision": self.first_decision,
         }
         out["preprocessing"] = [dict(s) for s in self.preprocessing]
+        if self.prepare is not None:
+            out["prepare"] = {"tensor": self.prepare_tensor}
         return out
 
     def instants(self, n: int) -> NDArray[np.int64]:
@@ -1305,6 +1338,7 @@ def check_detector_parity(
         Xv = Xv[:, None]
     ref_all = detector.decision_function(Xv, segments=segments)
     sess = session if session is not None else onnx_session(graph)
+    prep = graph.prepare_session() if graph.prepare is not None else None
     gated = bool((graph.features or {}).get("gate")) and isinstance(
         detector, FSRTouchSlip
     )
@@ -1316,7 +1350,7 @@ def check_detector_parity(
             continue
         if graph.preprocessing:
             windows = _preprocessed_windows(graph, Xv[a:z], inst)
-        out = sess.run([graph.score_output], {graph.input_name: windows})[0]
+        out = graph.run_windows(sess, windows, prep)
         ours.append(graph_scores(out))
         refs.append(ref_all[a + inst])
         if gated:

@@ -246,13 +246,16 @@ def check_opset(opset: int) -> int:
     return int(opset)
 
 
-def finalize_model(model: onnx.ModelProto) -> onnx.ModelProto:
+def finalize_model(
+    model: onnx.ModelProto, extra_inputs: tuple[str, ...] = ()
+) -> onnx.ModelProto:
     """Stamp IR :data:`IR_VERSION` and the producer, then run ``onnx.checker.check_model``.
 
     Raises ExportError when the default-domain opset is not supported, the input
     is not a single float32 or float64 tensor with a symbolic first dimension, or
     the checker
-    fails.
+    fails. ``extra_inputs``: inputs the runtime feeds besides the frame input (a
+    prepare graph's tensor), left out of the one-input rule.
     """
     from slipkit import __version__
 
@@ -275,7 +278,11 @@ def finalize_model(model: onnx.ModelProto) -> onnx.ModelProto:
             f"expected one of {SUPPORTED_OPSETS}"
         )
     initializers = {t.name for t in model.graph.initializer}
-    inputs = [i for i in model.graph.input if i.name not in initializers]
+    inputs = [
+        i
+        for i in model.graph.input
+        if i.name not in initializers and i.name not in extra_inputs
+    ]
     if len(inputs) != 1:
         raise ExportError(
             f"graph {model.graph.name!r} has {len(inputs)} inputs; expected one"

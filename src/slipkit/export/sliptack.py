@@ -64,6 +64,23 @@ arithmetic; the per-``f_max`` ``TopK`` over ``(n_fmax, c)`` was the largest node
 (and grows with the number of peaks); the shipped detector config's graph has 73
 nodes (84 before).
 
+Prepared spectrum (``prepare=True``, the export default through ``slipkit export``'s
+``regression.prepare``; issue 16). Steps 1-2 are linear in the samples, so the DFT of a
+decision's window is the DFT of the same window with its newest sample replaced by the
+one before it, plus ``(x[W - 1] - x[W - 2])`` times a constant column
+(:func:`last_sample_column`). The export then writes two graphs: a *prepare* graph
+(:func:`_prepare_graph`, 20 nodes: steps 1-2 on ``[x[1:], x[-1]]`` of the window the
+runtime holds one frame before the decision) whose output :data:`PARTIAL` the runtime
+feeds to the main graph, which adds the newest sample's share (five nodes) and runs
+steps 3-4. :class:`~slipkit.runtime.StreamLoop` runs the prepare graph on the frame
+before each decision (manifest ``prepare``, :mod:`slipkit.runtime.bundle`), a frame
+that otherwise only stores its sample; the decision frame's latency holds the main
+graph alone (62 nodes instead of 73). The difference is rounded once in float32
+(``6e-8`` of itself, not of the samples' offset) and the prepared DFT is float32 as the
+whole-window graph's: speeds agree with the whole-window graph's within ``1e-6``
+relative. A constant window stays exactly 0 (the prepared window is constant and the
+difference 0).
+
 Decision. A speed has no slip class; :class:`SpeedSlipDetector` wraps a fitted
 estimator with a speed threshold (mm/s): slip (``1``) where ``speed >= threshold``,
 no slip where the speed is below it or undefined. Threshold 0 reads "a stick-slip
@@ -190,8 +207,12 @@ def _spectrum(
     reshape to ``(b, W)``, and the product's layout gives the power in one
     ``ReduceSumSquare`` without a reshape after it).
     """
+    return _power(g, _dft(g, _windowed(g, x, est, rank), est, dft_dtype, rank))
+
+
+def _windowed(g: GraphBuilder, x: str, est: StickSlipSpeed, rank: int) -> str:
+    """Step 1 (detrend) and the Hamming weights: ``(b, W[, 1])`` float64 in and out."""
     w = int(est.window)
-    nfft = w * int(est.pad_factor)
     s = min(int(est.detrend_frames), w)
     i64 = np.int64
     # the residual is invariant to a constant shift; subtracting the first sample
@@ -208,32 +229,79 @@ def _spectrum(
     # h (xc - diff / s): the Hamming weights and 1 / s as two constant Muls
     shape = (w, 1) if rank == 3 else (w,)
     h = np.hamming(w)
-    xw = g.op(
+    return g.op(
         "Sub",
         g.op("Mul", xc, _d(g, h.reshape(shape))),
         g.op("Mul", diff, _d(g, (h / s).reshape(shape))),
         stem="windowed",
     )
+
+
+def _dft(
+    g: GraphBuilder, xw: str, est: StickSlipSpeed, dft_dtype: str, rank: int
+) -> str:
+    """Step 2's two products: the windowed samples ``xw`` (float64, ``(b, W[, 1])``) to
+    the DFT ``(b, N1, 1, 2 K2)`` in ``dft_dtype`` (re and im interleaved per ``k2``)."""
+    w = int(est.window)
+    nfft = w * int(est.pad_factor)
+    i64 = np.int64
+    tail = [0] if rank == 3 else []
     if nfft > w:
         pad = [0, 0, *tail, 0, nfft - w, *tail]
         xw = g.op("Pad", xw, g.const(pad, i64), stem="zero_padded")
-    f1, gm, n1, k2n = dft_matrices(nfft)
-    n2 = nfft // n1
+    f1i, gi, n1, n2 = _dft_constants(nfft)
     dt = np.float32 if dft_dtype == "float32" else np.float64
     if dt is np.float32:
         xw = g.op("Cast", xw, to=FLOAT)
     grid = g.op("Reshape", xw, g.const([-1, n1, n2], i64), stem="grid")
-    # F1's rows interleaved per k1 (cos row, then -sin row), so that A reshapes to
-    # (b, N1, 1, 2 N2): [A_re, A_im] of each k1 as one row, and stage 2 is N1 products
-    # of one 2 N2 row by G[k1]; G's columns interleave re and im per k2, so that the
-    # product reshapes to (b, 1, N1 K2, 2) and one ReduceSumSquare gives the power
-    f1i = f1.reshape(2, n1, n1).transpose(1, 0, 2).reshape(2 * n1, n1)
     a = g.op("MatMul", g.const(f1i, dt), grid, stem="stage1")  # (b, 2 N1, N2)
     a = g.op("Reshape", a, g.const([-1, n1, 1, 2 * n2], i64))
+    return g.op("MatMul", a, g.const(gi, dt), stem="stage2")  # (b, N1, 1, 2 K2)
+
+
+def _dft_constants(nfft: int) -> tuple[FloatArray, FloatArray, int, int]:
+    """:func:`dft_matrices` in the layout :func:`_dft` multiplies by: ``F1`` with its
+    rows interleaved per ``k1`` (cos row, then -sin row), so that stage 1's output
+    reshapes to ``(b, N1, 1, 2 N2)`` (``[A_re, A_im]`` of each ``k1`` as one row, and
+    stage 2 is ``N1`` products of one ``2 N2`` row by ``G[k1]``), and ``G``'s columns
+    interleaving re and im per ``k2`` (the product reshapes to ``(b, 1, N1 K2, 2)``,
+    one ``ReduceSumSquare`` from the power). Returns ``(F1, G, N1, N2)``."""
+    f1, gm, n1, k2n = dft_matrices(nfft)
+    n2 = nfft // n1
+    f1i = f1.reshape(2, n1, n1).transpose(1, 0, 2).reshape(2 * n1, n1)
     gi = gm.reshape(n1, 2 * n2, 2, k2n).transpose(0, 1, 3, 2).reshape(n1, 2 * n2, -1)
-    y = g.op("MatMul", a, g.const(gi, dt), stem="stage2")  # (b, N1, 1, 2 K2)
-    y = g.op("Reshape", y, g.const([-1, 1, n1 * k2n, 2], i64))
+    return f1i, gi, n1, n2
+
+
+def _power(g: GraphBuilder, y: str) -> str:
+    """The DFT ``y`` ``(b, N1, 1, 2 K2)`` to its power ``(b, 1, N1 K2)`` (same dtype)."""
+    i64 = np.int64
+    y = g.op("Reshape", y, g.const([0, 1, -1, 2], i64))
     return _reduce(g, "ReduceSumSquare", y, (3,), 0)  # (b, 1, N1 K2)
+
+
+def last_sample_column(est: StickSlipSpeed) -> FloatArray:
+    """What the window's newest sample adds to :func:`_dft`'s output, per unit.
+
+    Steps 1-2 are linear in the samples: the DFT of a window is that of the same
+    window with its newest sample replaced by the one before it, plus ``(x[W - 1] -
+    x[W - 2])`` times this column (the steps applied, in float64, to the unit vector
+    of the last sample: :func:`scipy.ndimage.uniform_filter1d` as the batch
+    estimator's detrend, then the Hamming weights and the DFT in :func:`_dft`'s
+    layout). Returns shape ``(N1 2 K2,)``.
+    """
+    from scipy.ndimage import uniform_filter1d
+
+    w = int(est.window)
+    nfft = w * int(est.pad_factor)
+    s = min(int(est.detrend_frames), w)
+    e = np.zeros(w)
+    e[-1] = 1.0
+    xw = np.zeros(nfft)
+    xw[:w] = np.hamming(w) * (e - uniform_filter1d(e, s, mode="nearest"))
+    f1i, gi, n1, n2 = _dft_constants(nfft)
+    a = (f1i @ xw.reshape(n1, n2)).reshape(n1, 1, 2 * n2)
+    return np.asarray(a @ gi, dtype=np.float64).reshape(-1)
 
 
 def _bin_positions(nfft: int) -> NDArray[np.intp]:
@@ -632,6 +700,7 @@ def export_stick_slip_speed(
     threshold: float | None = None,
     dft_dtype: str = "float32",
     incremental: bool = False,
+    prepare: bool = False,
     opset: int = DEFAULT_OPSET,
 ) -> DetectorGraph:
     """Export a fitted :class:`StickSlipSpeed` over a window of ``window`` nib samples.
@@ -655,6 +724,12 @@ def export_stick_slip_speed(
         from the previous one), the graph reading its power spectrum ``(batch,
         nfft / 2 + 1)`` (module docstring, *Incremental*). Needs the detrend's
         range boundaries on the hop grid (:func:`incremental_problem`).
+    prepare : bool
+        Split the graph in two (module docstring, *Prepared spectrum*): a
+        ``prepare`` graph the runtime runs on the frame before each decision
+        (steps 1-2 on the window with its newest sample not yet known) and the
+        main graph, which adds the newest sample's share (:func:`last_sample_column`)
+        to the prepared DFT and runs steps 3-4. Not with ``incremental``.
     opset : int
         Default-domain opset (17 or 18).
 
@@ -692,6 +767,12 @@ def export_stick_slip_speed(
     scale, shift, table = 1.0, 0.0, None
     if quantity == "speed" and estimator.form != "paper":
         scale, shift, table = _speed_index(estimator)
+    if prepare and (incremental or w < 2):
+        raise ExportError(
+            "StickSlipSpeed export: prepare needs the whole-window graph "
+            "(incremental=False) and a window of at least 2 samples"
+        )
+    prep_model = None
     if incremental:
         why = incremental_problem(estimator)
         if why is not None:
@@ -704,6 +785,30 @@ def export_stick_slip_speed(
         )
         power = g.op("Reshape", power, g.const([-1, 1, nb], np.int64))
         value = _peak_value(g, power, np.arange(nb), nb, estimator, dt, scale, shift)
+    elif prepare:
+        inp = helper.make_tensor_value_info(WINDOW_INPUT, FLOAT, ["batch", w, 1])
+        nfft = w * int(estimator.pad_factor)
+        n1, k2n = _dims(nfft)
+        proto = FLOAT if dt is np.float32 else DOUBLE
+        part = helper.make_tensor_value_info(PARTIAL, proto, ["batch", 1, 2 * n1 * k2n])
+        # the newest sample's share: (x[W - 1] - x[W - 2]) x its column; the float32
+        # difference is rounded once (relative 6e-8 of itself), where a product of
+        # each sample by the column would lose the difference to an offset
+        delta = g.op(
+            "Sub",
+            _slice(g, WINDOW_INPUT, w - 1, w, 1),
+            _slice(g, WINDOW_INPUT, w - 2, w - 1, 1),
+            stem="newest",
+        )  # (b, 1, 1)
+        if dt is not np.float32:
+            delta = g.op("Cast", delta, to=DOUBLE)
+        col = last_sample_column(estimator).reshape(1, 1, -1)
+        y = g.op("Add", PARTIAL, g.op("Mul", delta, g.const(col, dt)), stem="dft")
+        power = _power(g, y)
+        value = _peak_value(
+            g, power, _bin_positions(nfft), n1 * k2n, estimator, dt, scale, shift
+        )
+        prep_model = _prepare_graph(estimator, quantity, dft_dtype, opset, part)
     else:
         inp = helper.make_tensor_value_info(WINDOW_INPUT, FLOAT, ["batch", w, 1])
         x = g.op("Cast", WINDOW_INPUT, to=DOUBLE, stem="x")  # (b, W, 1)
@@ -725,12 +830,13 @@ def export_stick_slip_speed(
     unit = "mm/s" if quantity == "speed" else "Hz"
     lo, hi = (float(v) for v in estimator.f_max_range)
     model = g.build(
-        [inp],
+        [inp] if prep_model is None else [inp, part],
         [helper.make_tensor_value_info(SCORE, FLOAT, ["batch"])],
         doc=(
             f"StickSlipSpeed: {quantity} ({unit}) of the last {w} nib samples (eqs. 6-7, "
             f"f_max {lo:g}-{hi:g} Hz, eq. 3 {estimator.form} form)"
         ),
+        extra_inputs=(PARTIAL,) if prep_model is not None else (),
     )
     meaning = (
         f"StickSlipSpeed {'predict' if quantity == 'speed' else 'frequency'} at the "
@@ -769,6 +875,7 @@ def export_stick_slip_speed(
             "dft_factors": list(_factor(w * int(estimator.pad_factor))),
             "dft_dtype": dft_dtype,
             "incremental": bool(incremental),
+            "prepare": bool(prepare),
             "min_peak_to_mean": float(
                 getattr(estimator, "min_peak_to_mean", 0.0) or 0.0
             ),
@@ -782,6 +889,43 @@ def export_stick_slip_speed(
         first_decision=w - 1,
         strict=False,
         preprocessing=steps,
+        prepare=prep_model,
+        prepare_tensor=PARTIAL if prep_model is not None else "",
+    )
+
+
+#: The tensor the prepare graph hands to the main graph (the DFT with the newest
+#: sample held at the one before it, ``(batch, 1, 2 N1 K2)``).
+PARTIAL = "partial"
+
+
+def _prepare_graph(
+    est: StickSlipSpeed,
+    quantity: str,
+    dft_dtype: str,
+    opset: int,
+    out: onnx.ValueInfoProto,
+) -> onnx.ModelProto:
+    """The prepare graph: the previous frame's window in, :data:`PARTIAL` out.
+
+    The runtime runs it on the frame before a decision, on that frame's window (the
+    main graph's input, one frame early). The decision's window is that window less
+    its oldest sample plus the sample still to come; the graph drops the oldest and
+    repeats the newest in its place (``[x[1:], x[-1]]``), then steps 1-2.
+    """
+    w = int(est.window)
+    g = GraphBuilder(f"stick_slip_{quantity}_prepare", opset)
+    inp = helper.make_tensor_value_info(WINDOW_INPUT, FLOAT, ["batch", w, 1])
+    x = g.op("Cast", WINDOW_INPUT, to=DOUBLE, stem="x")
+    v = g.op("Concat", _slice(g, x, 1, w, 1), _slice(g, x, w - 1, w, 1), axis=1)
+    y = _dft(g, _windowed(g, v, est, 3), est, dft_dtype, 3)
+    g.nodes.append(
+        helper.make_node("Reshape", [y, g.const([0, 1, -1], np.int64)], [PARTIAL])
+    )
+    return g.build(
+        [inp],
+        [out],
+        doc="StickSlipSpeed prepare: the DFT of the next window, its newest sample held",
     )
 
 
@@ -876,6 +1020,7 @@ def export_speed_slip_detector(
     *,
     dft_dtype: str = "float32",
     incremental: bool = False,
+    prepare: bool = False,
     opset: int = DEFAULT_OPSET,
 ) -> DetectorGraph:
     """Export a fitted :class:`SpeedSlipDetector`: the speed graph with its threshold."""
@@ -885,6 +1030,7 @@ def export_speed_slip_detector(
         threshold=detector.threshold_,
         dft_dtype=dft_dtype,
         incremental=incremental,
+        prepare=prepare,
         opset=opset,
     )
 

@@ -71,6 +71,21 @@ to zeros on a gap, a bad frame, a window skipped as non-finite and ``reset()``
 (``docs/deploy.md``, "Recurrent state"). At most :data:`MAX_STATE` entries, each of
 at most ``MAX_VALUES`` values; the names must be graph inputs / outputs of that shape
 and dtype (checked at load).
+
+Prepared decisions (optional ``prepare``, no version bump, as ``state``)::
+
+      "prepare": {"tensor": "partial"},
+      "files": {"model.onnx": "…", "prepare.onnx": "…", ...}
+
+A second graph, ``prepare.onnx`` (listed in ``files``), takes the same input as
+``model.onnx`` (``inputs[0]``) and has one output, named ``tensor``; the main graph has
+a second input of that name, dtype and shape. :class:`~slipkit.runtime.loop.StreamLoop`
+runs the prepare graph on the frame *before* each decision, on that frame's window,
+and feeds its output to the main graph at the decision: work that does not need the
+newest frame is done one frame early, and the decision frame's latency holds only the
+rest (the SlipTack speed graph: the spectrum of the window with its newest sample held,
+``docs/deploy.md``, "SlipTack: a prepared spectrum"). Not with ``state`` or
+``preprocessing`` steps (a stateful step would see every window twice).
 """
 
 from __future__ import annotations
@@ -143,8 +158,11 @@ TOP_FIELDS = (
     "training",
     "files",
     "state",
+    "prepare",
     DIGEST_FIELD,
 )
+#: The prepare graph's file (manifest ``prepare``).
+PREPARE_FILE = "prepare.onnx"
 #: Most recurrent state tensors (``state`` entries) a bundle may carry.
 MAX_STATE = 8
 #: dtypes a state tensor may have (the loop keeps it in a numpy buffer of that dtype).
@@ -377,6 +395,8 @@ class Manifest:
         The decoded JSON as read.
     state : tuple of StateSpec
         Recurrent state the loop carries between frames (``()``: none).
+    prepare : str or None
+        The tensor ``prepare.onnx`` hands to the main graph (None: no prepare graph).
     """
 
     name: str
@@ -394,6 +414,7 @@ class Manifest:
     files: dict[str, str]
     raw: dict[str, Any]
     state: tuple[StateSpec, ...] = ()
+    prepare: str | None = None
 
 
 def _output_shape(f: Fields) -> tuple[int | None, ...]:
@@ -492,6 +513,45 @@ def _state(
                 raise f.error(key, f"{getattr(spec, key)!r} is named twice in state")
         specs.append(spec)
     return tuple(specs)
+
+
+def _prepare(
+    top: Fields,
+    inputs: tuple[TensorSpec, ...],
+    decision_output: str,
+    state: tuple[StateSpec, ...],
+    steps: list[dict[str, Any]],
+    files: dict[str, str],
+) -> str | None:
+    """The optional ``prepare`` object (module docstring), checked without the graphs."""
+    if "prepare" not in top.obj:
+        if PREPARE_FILE in files:
+            raise top.error(
+                f"files.{PREPARE_FILE}",
+                "is listed but the manifest has no 'prepare' field naming its tensor",
+            )
+        return None
+    f = top.child("prepare")
+    f.only(("tensor",))
+    tensor = f.string("tensor")
+    if tensor in (inputs[0].name, decision_output):
+        raise f.error(
+            "tensor",
+            f"{tensor!r} is the frame input or the score output; name another",
+        )
+    if state:
+        raise f.error("tensor", "a bundle has either 'prepare' or 'state', not both")
+    if steps:
+        raise f.error(
+            "tensor",
+            "needs an empty 'preprocessing': the prepare graph reads the window "
+            "the main graph reads, one frame early",
+        )
+    if PREPARE_FILE not in files:
+        raise top.error(
+            "files", f"has no {PREPARE_FILE!r} entry but the manifest has 'prepare'"
+        )
+    return tensor
 
 
 def _frame(f: Fields) -> FrameSpec:
@@ -774,8 +834,10 @@ def validate_manifest(obj: object, file: str = MANIFEST_FILE) -> Manifest:
                 f"must be a 64-digit lower-case sha256 hex; got {digest!r}",
             )
     state = _state(top, inputs, decision.output)
+    prepare = _prepare(top, inputs, decision.output, state, steps, files)
     return Manifest(
         state=state,
+        prepare=prepare,
         name=name,
         frame=frame,
         preprocessing=tuple(steps),
@@ -814,6 +876,10 @@ class Bundle:
     deadline_s : float
         The load deadline, s: the graph's first call had to end within it, and the
         loop's warm-up stops once it has taken that long.
+    prepare_model : bytes
+        ``prepare.onnx`` (``b""`` without a ``prepare`` field).
+    prepare_session : onnxruntime.InferenceSession or None
+        Its session, built with the same options as ``session``.
     """
 
     path: Path
@@ -823,6 +889,8 @@ class Bundle:
     session_spec: SessionSpec
     preprocessing: Pipeline
     deadline_s: float = DEFAULT_DEADLINE_S
+    prepare_model: bytes = b""
+    prepare_session: ort.InferenceSession | None = None
 
     @property
     def replay_path(self) -> Path | None:
@@ -832,7 +900,12 @@ class Bundle:
     def with_session(self, spec: SessionSpec) -> Bundle:
         """The same bundle with a new session built from ``spec``."""
         sess = _session(self.model, spec, str(self.path / MODEL_FILE))
-        return replace(self, session=sess, session_spec=spec)
+        prep = (
+            _session(self.prepare_model, spec, str(self.path / PREPARE_FILE))
+            if self.prepare_session is not None
+            else None
+        )
+        return replace(self, session=sess, session_spec=spec, prepare_session=prep)
 
 
 def _one_line(exc: BaseException) -> str:
@@ -905,13 +978,21 @@ def _check_graph(
         _check_state(manifest, session, top)
         state_inputs = {s.input for s in manifest.state}
         graph_inputs = [g for g in graph_inputs if g.name not in state_inputs]
+    if manifest.prepare is not None:
+        if manifest.prepare not in {g.name for g in graph_inputs}:
+            raise top.error(
+                "prepare.tensor",
+                f"{manifest.prepare!r} is not an input of {MODEL_FILE}; its inputs are "
+                f"{sorted(g.name for g in graph_inputs)}",
+            )
+        graph_inputs = [g for g in graph_inputs if g.name != manifest.prepare]
     if len(graph_inputs) != 1:
         raise BundleError(
             model_file,
             None,
-            f"the graph has {len(graph_inputs)} inputs besides the state; the runtime "
-            "feeds exactly one"
-            if manifest.state
+            f"the graph has {len(graph_inputs)} inputs besides the state or the "
+            "prepared tensor; the runtime feeds exactly one"
+            if manifest.state or manifest.prepare
             else f"the graph has {len(graph_inputs)} inputs; the runtime feeds exactly one",
         )
     got = graph_inputs[0]
@@ -1001,12 +1082,14 @@ def _check_decision_size(
     manifest_file: str,
     model_file: str,
     deadline_s: float,
+    prepared: Mapping[str, Any] | None = None,
 ) -> None:
     """One call on a zero input, under the deadline: the score output must have the
-    shape the manifest gives and the entries the rule reads."""
+    shape the manifest gives and the entries the rule reads (``prepared``: the
+    prepare graph's output on the same zero input, fed too)."""
     (inp,) = manifest.inputs
     x = np.zeros(inp.static_shape, dtype=np.dtype(inp.dtype))
-    feed = {inp.name: x}
+    feed = {inp.name: x, **(prepared or {})}
     feed.update(
         {s.input: np.zeros(s.shape, dtype=np.dtype(s.dtype)) for s in manifest.state}
     )
@@ -1171,7 +1254,7 @@ def load_bundle(
     obj = _read_manifest(manifest_path)
     _check_digest(obj, mfile)
     manifest = validate_manifest(obj, mfile)
-    model = b""
+    model = prepare_model = b""
     for fname, digest in manifest.files.items():
         fpath = root / fname
         if not fpath.is_file():
@@ -1181,14 +1264,18 @@ def load_bundle(
                 f"is missing but listed in {MANIFEST_FILE} field 'files.{fname}'",
             )
         try:
-            if fname == MODEL_FILE:
+            if fname in (MODEL_FILE, PREPARE_FILE):
                 size = fpath.stat().st_size
                 if size > MAX_MODEL_BYTES:
                     raise BundleError(
                         str(fpath), None, f"is {size} bytes; at most {MAX_MODEL_BYTES}"
                     )
-                model = fpath.read_bytes()
-                actual = sha256_bytes(model)
+                content = fpath.read_bytes()
+                actual = sha256_bytes(content)
+                if fname == MODEL_FILE:
+                    model = content
+                else:
+                    prepare_model = content
             else:
                 actual = sha256_file(fpath)
         except OSError as exc:
@@ -1217,8 +1304,85 @@ def load_bundle(
             f"{list(in_shape)} holds {math.prod(in_shape)} values but the window "
             f"{list(window_shape)} after preprocessing has shape {list(pipeline.out_shape)}",
         )
-    _check_decision_size(manifest, sess, mfile, model_file, float(deadline_s))
-    return Bundle(root, manifest, model, sess, spec, pipeline, float(deadline_s))
+    prep_sess = None
+    prepared: dict[str, Any] = {}
+    if manifest.prepare is not None:
+        prep_file = str(root / PREPARE_FILE)
+        prep_sess = _session(prepare_model, spec, prep_file)
+        prepared = _check_prepare(
+            manifest, prep_sess, sess, prep_file, mfile, deadline_s
+        )
+    _check_decision_size(manifest, sess, mfile, model_file, float(deadline_s), prepared)
+    return Bundle(
+        root,
+        manifest,
+        model,
+        sess,
+        spec,
+        pipeline,
+        float(deadline_s),
+        prepare_model,
+        prep_sess,
+    )
+
+
+def _check_prepare(
+    manifest: Manifest,
+    prep: ort.InferenceSession,
+    main: ort.InferenceSession,
+    prep_file: str,
+    manifest_file: str,
+    deadline_s: float,
+) -> dict[str, Any]:
+    """``prepare.onnx`` reads ``inputs[0]`` and gives ``prepare.tensor`` as the main
+    graph takes it; its first call (zero input, under the deadline) gives the feed
+    for the main graph's first call."""
+    (want,) = manifest.inputs
+    ins = prep.get_inputs()
+    if len(ins) != 1 or ins[0].name != want.name:
+        raise BundleError(
+            prep_file,
+            None,
+            f"must have one input named {want.name!r} (inputs[0]); it has "
+            f"{[g.name for g in ins]}",
+        )
+    if INPUT_DTYPES.get(ins[0].type) != want.dtype:
+        raise BundleError(
+            prep_file,
+            None,
+            f"input {want.name!r} is {ins[0].type} but inputs[0].dtype is {want.dtype!r}",
+        )
+    tensor = manifest.prepare
+    outs = {o.name: o for o in prep.get_outputs()}
+    if tensor not in outs:
+        raise BundleError(
+            prep_file,
+            None,
+            f"has no output {tensor!r} (manifest field 'prepare.tensor'); its outputs "
+            f"are {sorted(outs)}",
+        )
+    feed_in = {g.name: g for g in main.get_inputs()}[tensor]
+    if outs[tensor].type != feed_in.type:
+        raise BundleError(
+            prep_file,
+            None,
+            f"output {tensor!r} is {outs[tensor].type} but {MODEL_FILE} reads it as "
+            f"{feed_in.type}",
+        )
+    x = np.zeros(want.static_shape, dtype=np.dtype(want.dtype))
+    (value,) = run_with_deadline(prep, [tensor], {want.name: x}, deadline_s, prep_file)
+    value = np.asarray(value)
+    dims = list(feed_in.shape or [])
+    if len(dims) != value.ndim or any(
+        isinstance(d, int) and d != v for d, v in zip(dims, value.shape, strict=False)
+    ):
+        raise BundleError(
+            prep_file,
+            None,
+            f"output {tensor!r} has shape {list(value.shape)} on the first call but "
+            f"{MODEL_FILE} reads it as {dims}",
+        )
+    return {tensor: value}
 
 
 def _jsonable(value: Any) -> Any:
@@ -1262,6 +1426,7 @@ def write_bundle(
     *,
     replay: tuple[np.ndarray, np.ndarray] | None = None,
     overwrite: bool = False,
+    prepare: bytes | None = None,
 ) -> Path:
     """Write a bundle atomically: a temporary sibling folder, checked, then renamed.
 
@@ -1283,6 +1448,8 @@ def write_bundle(
     overwrite : bool
         Replace an existing bundle folder (only a bundle: any other folder or file
         under out is refused, as is an out inside a slipkit folder).
+    prepare : bytes, optional
+        The prepare graph (``prepare.onnx``; the manifest then has ``prepare``).
 
     Returns
     -------
@@ -1308,6 +1475,8 @@ def write_bundle(
     man.setdefault("format", FORMAT)
     man.setdefault("schema_version", SCHEMA_VERSION)
     man["files"] = {MODEL_FILE: sha256_bytes(model)}
+    if prepare is not None:
+        man["files"][PREPARE_FILE] = sha256_bytes(prepare)
     man.pop(DIGEST_FIELD, None)
     man["outputs"] = _describe_outputs(
         man.get("outputs"), model, str(target / MODEL_FILE)
@@ -1322,6 +1491,8 @@ def write_bundle(
     checked = validate_manifest(man, mfile)
     with atomic_dir(target, overwrite=overwrite, kind="bundle") as tmp:
         (tmp / MODEL_FILE).write_bytes(model)
+        if prepare is not None:
+            (tmp / PREPARE_FILE).write_bytes(prepare)
         if replay is not None:
             frames, times = check_replay_arrays(
                 np.asarray(replay[0]),

@@ -217,7 +217,9 @@ def _parser() -> argparse.ArgumentParser:
         help="print (and add to --json) which heavy libraries (torch, sklearn, hydra, pandas, ...) were imported",
     )
     # Real-time options (slipkit.runtime.realtime; docs/deploy.md, Deadlines under load)
-    rt = p.add_argument_group("real-time options (docs/deploy.md, Deadlines under load)")
+    rt = p.add_argument_group(
+        "real-time options (docs/deploy.md, Deadlines under load)"
+    )
     rt.add_argument(
         "--cpus",
         metavar="LIST",
@@ -306,6 +308,14 @@ def _summary_lines(summary: dict[str, Any], source: str) -> list[str]:
         lines.append(
             "latency arrival->decision (ms): "
             f"p50 {_fmt(lat['p50'])}  p99 {_fmt(lat['p99'])}  max {_fmt(lat['max'])}  mean {_fmt(lat['mean'])}"
+        )
+    prep = s.get("prepare")
+    if prep is not None and prep["latency_ms"] is not None:
+        pl = prep["latency_ms"]
+        lines.append(
+            f"prepare frames ({prep['calls']}, prepare.onnx on the frame before a "
+            f"decision; {prep['late']} late) arrival->done (ms): p50 {_fmt(pl['p50'])}  "
+            f"p99 {_fmt(pl['p99'])}  max {_fmt(pl['max'])}; {prep['over_budget']} over budget"
         )
     verdict = {True: "met", False: "MISSED", None: "not measured (no decisions)"}[
         s["within_budget"]

@@ -79,6 +79,23 @@ input or score was not finite, and :meth:`StreamLoop.reset`: the first window sc
 after any of these starts from a fresh state, as if a new recording began there.
 Each such event is counted (``state_resets``). A stateful bundle never takes the
 hop-1 fast path (``_step_hop1``): :meth:`StreamLoop.step` handles the state.
+
+Prepared decisions
+------------------
+A bundle with a ``prepare`` graph (manifest ``prepare``; the SlipTack speed graph)
+splits each decision's work in two. On the frame *before* a decision frame the loop
+writes that frame's window into the graph input and runs the prepare graph, whose
+output lands in a preallocated buffer bound as the main graph's second input; the
+decision frame then runs only the main graph. The work that does not need the newest
+frame is done one frame early, on a frame that otherwise only stores its values, and
+each frame's latency holds one of the two parts. The prepare frames' latency (arrival
+to the end of the prepare call; for hop 1 that frame's decision included) is recorded
+too (``prepare`` in the summary), and ``within_budget`` needs both p99s within the
+budget. A decision whose prepare did not run on the frame before (a direct call of
+:meth:`StreamLoop.step` after a skipped frame) runs it first, on the previous window
+(counted as ``late``): the score is the same, only slower. The prepare call skips the
+value check: its input's oldest frame is not part of the next window (and is dropped
+by the graph), and the decision still checks the window it scores.
 """
 
 from __future__ import annotations
@@ -166,6 +183,14 @@ class LoopResult:
         Times a stateful bundle's recurrent state was set back to zeros (a flagged
         frame, a gap, a non-finite window; module docstring, *Recurrent state*);
         0 without state.
+    prepare_latency_ns : ndarray of int64
+        A bundle with a prepare graph: arrival to the end of the prepare call, ns, of
+        each frame that ran it (module docstring, *Prepared decisions*); empty
+        without one.
+    prepare_late : int
+        Decisions whose prepare graph ran on the decision frame itself.
+    has_prepare : bool
+        The bundle has a prepare graph.
     """
 
     frame: NDArray[np.int64]
@@ -191,6 +216,11 @@ class LoopResult:
     classes: tuple[str, ...] | None = None
     slip_classes: tuple[str, ...] = ()
     state_resets: int = 0
+    prepare_latency_ns: NDArray[np.int64] = field(
+        default_factory=lambda: np.zeros(0, dtype=np.int64)
+    )
+    prepare_late: int = 0
+    has_prepare: bool = False
 
     def class_counts(self) -> dict[str, int] | None:
         """Decisions per class, in class order (None when the bundle names no classes)."""
@@ -216,9 +246,12 @@ class LoopResult:
         whose class is one of ``slip_classes``; ``bad_frames``,
         ``bad_by_reason``, ``skipped_windows``, ``nonfinite_windows`` and ``gaps`` count
         what the loop flagged (module docstring, *Bad frames*); ``state_resets``
-        the times a recurrent state was zeroed (*Recurrent state*).
+        the times a recurrent state was zeroed (*Recurrent state*). With a prepare
+        graph, ``prepare`` holds its frames' latency (``calls``, ``late``, and
+        :func:`latency_summary`'s fields) and ``within_budget`` needs the decisions'
+        p99 and the prepare frames' p99 both within the budget (else None).
         """
-        return {
+        out = {
             "bundle": self.name,
             "frames": self.n_frames,
             "bad_frames": len(self.bad_reason),
@@ -237,7 +270,21 @@ class LoopResult:
                 float(self.timestamp[self.declared][0]) if self.declared.any() else None
             ),
             **latency_summary(self.latency_ns, self.budget),
+            "prepare": None,
         }
+        if self.has_prepare:
+            prep = latency_summary(self.prepare_latency_ns, self.budget)
+            prep.pop("budget_ms")
+            out["prepare"] = {
+                "calls": len(self.prepare_latency_ns),
+                "late": self.prepare_late,
+                **prep,
+            }
+            if out["within_budget"] is not None and prep["within_budget"] is not None:
+                out["within_budget"] = bool(
+                    out["within_budget"] and prep["within_budget"]
+                )
+        return out
 
 
 def latency_summary(latency_ns: ArrayLike, budget: Budget) -> dict[str, Any]:
@@ -377,6 +424,19 @@ class StreamLoop:
         self._feed.update(
             {s.input: h for s, h in zip(m.state, self._h_in, strict=True)}
         )
+        # Prepared decisions (module docstring): the prepare graph's output buffer,
+        # fed to the main graph as its second input.
+        self._prep = bundle.prepare_session if m.prepare is not None else None
+        self._prep_binding: ort.IOBinding | None = None
+        self._prepared_for = -1
+        if self._prep is not None:
+            assert m.prepare is not None
+            self._prep_name = m.prepare
+            self._prep_feed = {inp.name: self._input}
+            probe_p = self._prep.run([m.prepare], self._prep_feed)[0]
+            self._partial = np.zeros_like(np.asarray(probe_p))
+            self._feed[m.prepare] = self._partial
+            self._late_input = np.zeros_like(self._input)
         d = m.decision
         self._out_names = [d.output, *(s.output for s in m.state)]
         self._argmax = d.rule == "argmax"
@@ -416,11 +476,20 @@ class StreamLoop:
                 self._binding.bind_ortvalue_input(s.input, v_in)
                 self._binding.bind_ortvalue_output(s.output, v_out)
                 self._state_ort += [v_in, v_out]
+            if self._prep is not None:
+                part = ort.OrtValue.ortvalue_from_numpy(self._partial)
+                self._state_ort.append(part)
+                self._binding.bind_ortvalue_input(self._prep_name, part)
+                self._prep_binding = self._prep.io_binding()
+                self._prep_binding.bind_ortvalue_input(inp.name, self._in_ort)
+                self._prep_binding.bind_ortvalue_output(self._prep_name, part)
         # The warm-up stops early once it has taken the bundle's load deadline: it
         # only primes allocations, and a slow graph must not hold the start for
         # warmup x its call time.
         stop = time.perf_counter() + bundle.deadline_s
         for _ in range(bundle.session_spec.warmup):
+            if self._prep is not None:
+                self._run_prepare()
             self._call()
             if time.perf_counter() > stop:
                 break
@@ -441,9 +510,12 @@ class StreamLoop:
             and not self.nan_is_missing
             and self._binding is not None
             and not self._state  # step carries and resets the recurrent state
+            and self._prep is None
             and all(hasattr(op, "keeps_nonfinite") for op in self._ops)
         ):
             self.step = self._step_hop1  # type: ignore[method-assign]
+        if self._prep is not None:
+            self.step = self._step_prepared  # type: ignore[method-assign]
 
     def reset(self) -> None:
         """Forget the window, the debounce state, the records and any op state (e.g. a baseline)."""
@@ -471,7 +543,11 @@ class StreamLoop:
         for h in self._h_in:
             h.fill(0)
         self._state_resets = 0
+        self._prepared_for = -1
+        self._prep_late = 0
+        self._n_prep = 0
         cap = self._capacity
+        self._prep_lat = np.zeros(cap if self._prep is not None else 0, dtype=np.int64)
         self._frame = np.zeros(cap, dtype=np.int64)
         self._ts = np.zeros(cap)
         self._score = np.zeros(cap)
@@ -490,6 +566,49 @@ class StreamLoop:
             for h in self._h_in:
                 h.fill(0)
             self._state_resets += 1
+
+    def _run_prepare(self) -> None:
+        """The prepare graph on the graph input as written (its output: the buffer
+        the main graph reads)."""
+        assert self._prep is not None
+        if self._prep_binding is not None:
+            self._prep.run_with_iobinding(self._prep_binding)
+        else:
+            out = self._prep.run([self._prep_name], self._prep_feed)[0]
+            np.copyto(self._partial, out)
+
+    def _step_prepared(
+        self,
+        values: ArrayLike,
+        timestamp: float | None = None,
+        arrival_ns: int | None = None,
+    ) -> bool | None:
+        """:meth:`step`, then the prepare graph when the next frame completes a
+        window due for a decision (module docstring, *Prepared decisions*)."""
+        t0 = _clock() if arrival_ns is None else arrival_ns
+        out = StreamLoop.step(self, values, timestamp, t0)
+        nxt = self.n_frames + 1
+        w = self._w
+        if nxt >= w and not (nxt - w) % self._hop and nxt >= self._clean_from:
+            # this frame's window, as the main graph would read it (no
+            # preprocessing: the manifest refuses prepare with steps)
+            self._input_view[...] = self._windows[self._pos]
+            self._run_prepare()
+            self._prepared_for = nxt
+            i = self._n_prep
+            if i == len(self._prep_lat):
+                self._prep_lat = np.concatenate([self._prep_lat, self._prep_lat])
+            self._prep_lat[i] = _clock() - t0
+            self._n_prep = i + 1
+        return out
+
+    def _prepare_late(self) -> None:
+        """The prepare graph on the previous frame's window, the input restored after."""
+        np.copyto(self._late_input, self._input)
+        self._input_view[...] = self._windows[(self._pos - 1) % self._w]
+        self._run_prepare()
+        np.copyto(self._input, self._late_input)
+        self._prep_late += 1
 
     def _call(self) -> NDArray[Any]:
         if self._binding is None:
@@ -596,6 +715,10 @@ class StreamLoop:
         ``seen`` is the 1-based count of frames pushed, ``t0`` the arrival, ns.
         Returns as :meth:`step` does.
         """
+        if self._prep is not None:
+            if self._prepared_for != seen:
+                self._prepare_late()
+            self._prepared_for = -1
         if self._binding is None:
             score, *states = self._session.run(self._out_names, self._feed)
             for (_, h_out), h in zip(self._h_pairs, states, strict=True):
@@ -888,4 +1011,7 @@ class StreamLoop:
             classes=m.decision.classes,
             slip_classes=m.decision.slip_classes,
             state_resets=self._state_resets,
+            prepare_latency_ns=self._prep_lat[: self._n_prep].copy(),
+            prepare_late=self._prep_late,
+            has_prepare=self._prep is not None,
         )
