@@ -259,15 +259,25 @@ def numpy_svm_floor(model: Any, feats: np.ndarray) -> list[int]:
     return _time_calls(one, feats)
 
 
-def _bound(sess: Any, in_name: str, out_name: str, shape: list[int]) -> Any:
+def _bound(
+    sess: Any,
+    in_name: str,
+    out_name: str,
+    shape: list[int],
+    extra: dict[str, np.ndarray] | None = None,
+) -> Any:
     """A function ``x -> None`` that writes one input and runs the session through
-    IOBinding (the input buffer in the graph's input dtype, float32 or float64)."""
+    IOBinding (the input buffer in the graph's input dtype, float32 or float64).
+    ``extra``: further inputs bound once (a prepared bundle's prepared tensor)."""
     import onnxruntime as ort
 
     dtype = np.float64 if sess.get_inputs()[0].type == "tensor(double)" else np.float32
     xb = np.zeros(shape, dtype)
-    ob = np.zeros_like(np.asarray(sess.run([out_name], {in_name: xb})[0]))
+    feeds = {in_name: xb, **(extra or {})}
+    ob = np.zeros_like(np.asarray(sess.run([out_name], feeds)[0]))
     binding = sess.io_binding()
+    for k, v in (extra or {}).items():
+        binding.bind_ortvalue_input(k, ort.OrtValue.ortvalue_from_numpy(v))
     binding.bind_ortvalue_input(in_name, ort.OrtValue.ortvalue_from_numpy(xb))
     binding.bind_ortvalue_output(out_name, ort.OrtValue.ortvalue_from_numpy(ob))
 
@@ -522,7 +532,11 @@ def main() -> None:
 
             model = SpeedSlipDetector(speed=model["*"], threshold=0.0).fit()
         svm = name.startswith("tactip_svm")
-        graph = export(model, **({"with_features": True} if svm else {}))
+        graph = export(
+            model,
+            **({"with_features": True} if svm else {}),
+            **({"prepare": True} if m.prepare is not None else {}),
+        )
         replay = np.load(bundle_dir / "replay.npz")
         frames = replay["frames"][: args.frames]
         times = replay["timestamps"][: args.frames]
@@ -542,6 +556,23 @@ def main() -> None:
         if m.state:  # a step graph: the state bound and carried too
             bare = _bound_state(
                 bundle.session, inp.name, m.decision.output, [1, *in_shape], m.state
+            )
+        elif m.prepare is not None:
+            # a prepared bundle (SlipTack): the decision frame's call, the prepared
+            # tensor bound (its values from the first window: the main graph's cost
+            # does not depend on them); the prepare graph's own call, the work of the
+            # frame before, is timed beside it (a note under the table)
+            assert bundle.prepare_session is not None
+            part0 = bundle.prepare_session.run([m.prepare], {inp.name: x32[:1]})[0]
+            bare = _bound(
+                bundle.session,
+                inp.name,
+                m.decision.output,
+                [1, *in_shape],
+                {m.prepare: np.ascontiguousarray(part0)},
+            )
+            prep_bare = _bound(
+                bundle.prepare_session, inp.name, m.prepare, [1, *in_shape]
             )
         else:
             bare = _bound(bundle.session, inp.name, m.decision.output, [1, *in_shape])
@@ -577,7 +608,7 @@ def main() -> None:
             # decision_function above would restart from zeros every call)
             native, eager, module = _state_scorers(model)
         part: dict[str, list[tuple[float, float]]] = {
-            k: [] for k in ("bare", "native", "identity")
+            k: [] for k in ("bare", "native", "identity", "prepare", "prepare_frames")
         }
         old_path = None if args.before is None else args.before / name / "model.onnx"
         old_bare = None
@@ -625,6 +656,9 @@ def main() -> None:
                 loop.step(values, ts)
             stats["loop"].append(_pct(loop.result().latency_ns))
             stats["bare"].append(_pct(_time_calls(bare, x32)))
+            if m.prepare is not None:
+                part["prepare"].append(_pct(_time_calls(prep_bare, x32)))
+                part["prepare_frames"].append(_pct(loop.result().prepare_latency_ns))
             if old_bare is not None:
                 part["before"].append(_pct(_time_calls(old_bare, x_old)))
             if old_loop is not None:
@@ -676,7 +710,17 @@ def main() -> None:
             }
         )
         n_nodes = len(graph.model.graph.node)
-        if args.profile_nodes:
+        if m.prepare is not None and part["prepare"]:
+            pb = np.median(np.asarray(part["prepare"]), axis=0)
+            pf = np.median(np.asarray(part["prepare_frames"]), axis=0)
+            assert graph.prepare is not None
+            notes.append(
+                f"{name}: prepare.onnx ({len(graph.prepare.graph.node)} nodes, run on "
+                f"the frame before each decision; the main graph {n_nodes} nodes): "
+                f"bare p50 / p99 {pb[0]:.1f} / {pb[1]:.1f} us, the loop's prepare "
+                f"frames (arrival -> done) {pf[0]:.1f} / {pf[1]:.1f} us"
+            )
+        if args.profile_nodes and m.prepare is None:
             lines = profile_nodes(
                 bundle_dir / "model.onnx", bundle.session_spec.options(), x32[:300]
             )
