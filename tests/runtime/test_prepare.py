@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
+from slipkit._files import sha256_bytes
 from slipkit.baselines.sliptack import StickSlipSpeed
 from slipkit.export.detectors import NO_SCORE, check_detector_parity
 from slipkit.export.parity import onnx_session
@@ -295,6 +296,9 @@ def _edit(bundle: Path, fn: Any) -> None:
             "prepare.tensor",
         ),
         (lambda m: m["files"].pop(PREPARE_FILE), "files"),
+        (lambda m: m.update(prepare=[]), "prepare"),
+        (lambda m: m["prepare"].update(tensor=5), "prepare.tensor"),
+        (lambda m: m["prepare"].pop("tensor"), "prepare.tensor"),
     ],
 )
 def test_bad_prepare_fields_are_named(
@@ -317,5 +321,23 @@ def test_changed_prepare_graph_is_refused(
     data[-1] ^= 1
     (b / PREPARE_FILE).write_bytes(bytes(data))
     with pytest.raises(BundleError, match="sha256") as err:
+        load_bundle(b)
+    assert str(b / PREPARE_FILE) == err.value.file
+
+
+def test_prepare_graph_of_another_window_is_refused(
+    detector: SpeedSlipDetector, bundles: dict[str, Path], tmp_path: Path
+) -> None:
+    """A prepare.onnx whose input is another window length is refused at load, naming the file and the shapes."""
+    est = StickSlipSpeed(**{**PARAMS, "window": 200, "detrend_frames": 200}).fit(
+        np.zeros((1, 1)), np.full(1, np.nan)
+    )
+    other = export_stick_slip_speed(est, threshold=THRESHOLD, prepare=True)
+    b = _copy(bundles["prepared"], tmp_path)
+    data = other.serialize_prepare()
+    assert data is not None
+    (b / PREPARE_FILE).write_bytes(data)
+    _edit(b, lambda m: m["files"].update({PREPARE_FILE: sha256_bytes(data)}))
+    with pytest.raises(BundleError, match=r"inputs\[0\]\.shape") as err:
         load_bundle(b)
     assert str(b / PREPARE_FILE) == err.value.file

@@ -1352,6 +1352,17 @@ def _check_prepare(
             None,
             f"input {want.name!r} is {ins[0].type} but inputs[0].dtype is {want.dtype!r}",
         )
+    assert want.shape is not None
+    dims = [d if isinstance(d, int) else None for d in (ins[0].shape or [])]
+    if len(dims) != len(want.shape) or any(
+        d is not None and d != w for d, w in zip(dims, want.shape, strict=False)
+    ):
+        raise BundleError(
+            prep_file,
+            None,
+            f"input {want.name!r} has shape {ins[0].shape} but inputs[0].shape is "
+            f"{list(want.shape)} (the loop feeds both graphs the same window)",
+        )
     tensor = manifest.prepare
     outs = {o.name: o for o in prep.get_outputs()}
     if tensor not in outs:
