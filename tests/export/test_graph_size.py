@@ -151,6 +151,19 @@ def test_sliptack_speed_graph_does_not_grow_back(
     assert len(_ops(graph)) <= most
 
 
+def test_prepared_sliptack_decision_graph_stays_small() -> None:
+    """The shipped config's prepared export: at most 62 nodes on the decision frame and 20 in prepare.onnx (73 in one graph before)."""
+    graph = export_stick_slip_speed(
+        _sliptack(harmonics="fundamental", interpolate=True, min_peak_to_mean=20.0),
+        prepare=True,
+    )
+    assert graph.prepare is not None
+    assert (True, True) == (
+        len(_ops(graph)) <= 62,
+        len(graph.prepare.graph.node) <= 20,
+    )
+
+
 def test_baseline_first_subtracts_the_running_median_of_the_first_frames() -> None:
     """baseline_first gives x minus the median of the frames so far, frozen after n."""
     rng = np.random.default_rng(0)

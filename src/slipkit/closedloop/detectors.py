@@ -3,7 +3,8 @@
 * :class:`BundleDetector`: the code that runs on the gripper PC -
   :func:`slipkit.runtime.load_bundle` and :meth:`slipkit.runtime.StreamLoop.step`, one
   frame at a time, the bundle's own debounce; the loop's per-decision latency
-  (frame arrival -> decision, ns) is kept for the compute-per-frame columns.
+  (frame arrival -> decision, ns; with a prepare graph also its frames' latency) is
+  kept for the compute-per-frame columns.
 * :class:`OracleDetector`: reads the plant's true slip state (zero detection delay
   beyond the frame on which the slip starts): the lower bound.
 * :class:`NoDetector`: never declares: the upper bound (the retraction goes on).
@@ -131,7 +132,11 @@ class BundleDetector(Detector):
         self._lat: list[np.ndarray] = []
 
     def _collect(self) -> None:
-        lat = self.loop.result().latency_ns
+        # Every frame that ran a graph: the decisions and, for a bundle with a prepare
+        # graph (SlipTack), the frames before them, which carry the prepare call
+        # (docs/deploy.md, "Prepared decisions"): the compute per frame either way.
+        res = self.loop.result()
+        lat = np.concatenate([res.latency_ns, res.prepare_latency_ns])
         if len(lat):
             self._lat.append(np.asarray(lat, dtype=np.float64) / 1e3)
 
@@ -147,7 +152,8 @@ class BundleDetector(Detector):
         return self.loop.step(values, state.t, time.perf_counter_ns()) is True
 
     def latency_us(self) -> np.ndarray:
-        """Every decision's latency so far (this trial's included), us."""
+        """Every decision's latency so far (this trial's included; with a prepare graph
+        the prepare frames' too), us."""
         self._collect()
         out = np.concatenate(self._lat) if self._lat else np.zeros(0)
         self._lat = [out] if len(out) else []
