@@ -341,3 +341,51 @@ def test_prepare_graph_of_another_window_is_refused(
     with pytest.raises(BundleError, match=r"inputs\[0\]\.shape") as err:
         load_bundle(b)
     assert str(b / PREPARE_FILE) == err.value.file
+
+
+def test_choose_session_and_pinned_sessions_rebuild_the_prepare_graph(
+    bundles: dict[str, Path],
+) -> None:
+    """Session tuning measures a prepared bundle, and with_session rebuilds both graphs' sessions (same scores)."""
+    from slipkit.runtime import choose_session
+    from slipkit.runtime.session import SessionSpec
+
+    b = load_bundle(bundles["prepared"])
+    x, t = _stream()
+    rows = choose_session(b, x, t, rounds=1, max_frames=600)
+    pinned = b.with_session(SessionSpec(intra_op_num_threads=1, warmup=1))
+    loop = StreamLoop(pinned)
+    for v, ts in zip(x, t, strict=True):
+        loop.step(v, ts)
+    assert pinned.prepare_session is not b.prepare_session
+    assert (True, True) == (len(rows) >= 1, pinned.prepare_session is not None)
+    np.testing.assert_array_equal(
+        _loop_run(bundles["prepared"]).score, loop.result().score
+    )
+
+
+@pytest.mark.parametrize("mode", ["loop", "threads"])
+def test_a_prepared_bundle_in_a_hand(
+    bundles: dict[str, Path], tmp_path: Path, mode: str
+) -> None:
+    """Beside a whole-window bundle in one hand, the prepared bundle makes the same decisions and reports its prepare frames."""
+    out = tmp_path / "hand.json"
+    run(
+        [
+            "--stream",
+            f"a={bundles['prepared']}",
+            "--stream",
+            f"b={bundles['whole']}",
+            "--hand-mode",
+            mode,
+            "--json",
+            str(out),
+        ]
+    )
+    rows = {s["stream"]: s for s in json.loads(out.read_text())["streams"]}
+    assert rows["a"]["decisions"] == rows["b"]["decisions"]
+    assert rows["a"]["slip_decisions"] == rows["b"]["slip_decisions"]
+    assert (True, None) == (
+        rows["a"]["prepare"]["calls"] >= rows["a"]["decisions"],
+        rows["b"]["prepare"],
+    )
