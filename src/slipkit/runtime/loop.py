@@ -248,8 +248,9 @@ class LoopResult:
         what the loop flagged (module docstring, *Bad frames*); ``state_resets``
         the times a recurrent state was zeroed (*Recurrent state*). With a prepare
         graph, ``prepare`` holds its frames' latency (``calls``, ``late``, and
-        :func:`latency_summary`'s fields) and ``within_budget`` needs the decisions'
-        p99 and the prepare frames' p99 both within the budget (else None).
+        :func:`latency_summary`'s fields; None without a prepare graph) and
+        ``within_budget`` is False when either the decisions' p99 or the prepare
+        frames' p99 is over the budget.
         """
         out = {
             "bundle": self.name,
