@@ -517,6 +517,9 @@ class StreamLoop:
             self.step = self._step_hop1  # type: ignore[method-assign]
         if self._prep is not None:
             self.step = self._step_prepared  # type: ignore[method-assign]
+            # the prepared check lives in this bundle's _decide only: other bundles'
+            # per-frame path (_step_hop1 included) gains nothing
+            self._decide = self._decide_prepared  # type: ignore[method-assign]
 
     def reset(self) -> None:
         """Forget the window, the debounce state, the records and any op state (e.g. a baseline)."""
@@ -602,6 +605,16 @@ class StreamLoop:
             self._prep_lat[i] = _clock() - t0
             self._n_prep = i + 1
         return out
+
+    def _decide_prepared(
+        self, seen: int, timestamp: float | None, t0: int
+    ) -> bool | None:
+        """:meth:`_decide` for a bundle with a prepare graph: prepare late when the
+        frame before did not (module docstring, *Prepared decisions*), then decide."""
+        if self._prepared_for != seen:
+            self._prepare_late()
+        self._prepared_for = -1
+        return StreamLoop._decide(self, seen, timestamp, t0)
 
     def _prepare_late(self) -> None:
         """The prepare graph on the previous frame's window, the input restored after."""
@@ -716,10 +729,6 @@ class StreamLoop:
         ``seen`` is the 1-based count of frames pushed, ``t0`` the arrival, ns.
         Returns as :meth:`step` does.
         """
-        if self._prep is not None:
-            if self._prepared_for != seen:
-                self._prepare_late()
-            self._prepared_for = -1
         if self._binding is None:
             score, *states = self._session.run(self._out_names, self._feed)
             for (_, h_out), h in zip(self._h_pairs, states, strict=True):
