@@ -49,7 +49,10 @@ BUNDLE_FORMAT = "slipkit-bundle"
 #: Kinds recognised by a manifest: a folder inside one of them is never written into.
 MANIFEST_KINDS = ("dataset", "run", "bundle")
 #: Every kind a command writes.
-KINDS = (*MANIFEST_KINDS, "evaluation", "comparison", "demo")
+KINDS = (*MANIFEST_KINDS, "evaluation", "comparison", "demo", "lerobot")
+#: ``format`` of ``meta/slipkit.json`` in a LeRobot dataset that ``slipkit
+#: export-dataset`` wrote (= ``slipkit.data.lerobot.MARKER_FORMAT``).
+LEROBOT_FORMAT = "slipkit-lerobot"
 #: What a ``slipkit demo`` output folder holds (``configs/demo.yaml``).
 DEMO_ENTRIES = frozenset({"data", "compare", "exports", "report.md"})
 
@@ -113,12 +116,16 @@ def folder_kind(path: Path | str) -> str | None:
     ``run`` and ``dataset`` (what ``slipkit evaluate`` writes); ``comparison``: a
     ``report.md`` titled ``# Comparison:`` beside ``metrics.csv`` (``slipkit
     compare``); ``demo``: a folder holding only ``data/``, ``compare/``, ``exports/``
-    and ``report.md`` (``slipkit demo``; an interrupted demo may lack some of them).
+    and ``report.md`` (``slipkit demo``; an interrupted demo may lack some of them);
+    ``lerobot``: a LeRobot dataset whose ``meta/slipkit.json`` says slipkit wrote it
+    (``slipkit export-dataset``; a LeRobot dataset from any other tool is not one).
     """
     path = Path(path)
     kind = manifest_kind(path)
     if kind is not None or not path.is_dir():
         return kind
+    if _json_field(path / "meta" / "slipkit.json", "format") == LEROBOT_FORMAT:
+        return "lerobot"
     metrics = path / "metrics.json"
     if (
         path.parent.name == "evaluations"

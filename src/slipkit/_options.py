@@ -144,6 +144,16 @@ SEEDS = Rule(
 OPTIONS: dict[str, dict[str, Rule]] = {
     "import": {"path": PATH, "out": PATH, "overwrite": FLAG},
     "info": {"dataset": PATH, "verify": FLAG, "json": FLAG},
+    "export-dataset": {
+        "dataset": PATH,
+        "out": PATH,
+        "format": TEXT,
+        "stream": TEXT.null(),
+        "feature": TEXT.null(),
+        "task": TEXT.null(),
+        "overwrite": FLAG,
+        "verify": FLAG,
+    },
     "simulate": {
         "n_trials": COUNT,
         "seed": SEED,

@@ -30,6 +30,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "slipkit.data.commands:info_main",
         "print a dataset's summary (dataset=<folder>)",
     ),
+    "export-dataset": (
+        "slipkit.data.commands:export_dataset_main",
+        "write a dataset for other tools: LeRobot v3.0, trials as episodes (dataset=... out=...)",
+    ),
     "demo": (
         "slipkit.demo:demo_main",
         "the whole pipeline on built-in defaults: simulate, train, compare, export, replay, report",

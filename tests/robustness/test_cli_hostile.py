@@ -126,6 +126,12 @@ MALFORMED: list[tuple[list[str], str]] = [
     (["info"], "dataset=...: missing; this option is required"),
     (["info", "dataset={ds}", "verify=maybe"], "verify=maybe: expected true or false"),
     (["info", "dataset={ds}", "json=1"], "json=1: expected true or false"),
+    # export-dataset
+    (["export-dataset", "dataset={ds}"], "out=...: missing; this option is required"),
+    (
+        ["export-dataset", "dataset={ds}", "out={tmp}/lr", "overwrite=maybe"],
+        "overwrite=maybe: expected true or false",
+    ),
     # sweep (one Optuna study over train runs)
     (["sweep", "experiment=tactip_svm"], "search=...: missing; this option is"),
     (["sweep", "search=tactip_svm", "n_trials=2.9"], "n_trials=2.9: expected a whole"),

@@ -1,4 +1,4 @@
-"""``slipkit import`` and ``slipkit info``."""
+"""``slipkit import``, ``slipkit info`` and ``slipkit export-dataset``."""
 
 from __future__ import annotations
 
@@ -14,7 +14,10 @@ from slipkit._files import check_out_path
 from slipkit.data.dataset import Dataset
 from slipkit.data.io import save_dataset
 from slipkit.data.summary import format_summary, summary_of_folder
-from slipkit.errors import SourceFormatError
+from slipkit.errors import SlipkitError, SourceFormatError
+
+#: ``slipkit export-dataset format=...``: the layouts written.
+EXPORT_FORMATS = ("lerobot",)
 
 
 def import_main(cfg: DictConfig) -> Path:
@@ -46,3 +49,30 @@ def info_main(cfg: DictConfig) -> dict[str, Any]:
     else:
         print(format_summary(info))
     return info
+
+
+def export_dataset_main(cfg: DictConfig) -> Path:
+    """Write the dataset folder ``cfg.dataset`` in the layout ``cfg.format`` at ``cfg.out``."""
+    from slipkit.data.lerobot import DEFAULT_FEATURES, write_lerobot
+
+    fmt = str(cfg.format)
+    if fmt not in EXPORT_FORMATS:
+        raise SlipkitError(f"format={fmt}: expected one of {', '.join(EXPORT_FORMATS)}")
+    out = write_lerobot(
+        Path(str(cfg.dataset)),
+        Path(str(cfg.out)),
+        stream=None if cfg.stream is None else str(cfg.stream),
+        feature=None if cfg.feature is None else str(cfg.feature),
+        task=None if cfg.task is None else str(cfg.task),
+        overwrite=bool(cfg.overwrite),
+        verify=bool(cfg.verify),
+    )
+    info = json.loads((out / "meta" / "info.json").read_text(encoding="utf-8"))
+    (key,) = [k for k in info["features"] if k not in DEFAULT_FEATURES]
+    print(
+        f"LeRobot {info['codebase_version']}: {info['total_episodes']} episodes, "
+        f"{info['total_frames']} frames at {info['fps']} fps, feature {key} "
+        f"({info['features'][key]['shape'][0]} channels)"
+    )
+    print(out)
+    return out

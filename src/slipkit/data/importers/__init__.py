@@ -13,6 +13,8 @@ and writes the dataset folder. Malformed input raises
 - :func:`read_robotic_finger`: Robotic-Finger, 19 electrodes and the unit force
   direction, one snapshot trial per sample.
 - :func:`read_csv_dataset`: any CSV file or folder of CSVs, one stream.
+- :func:`read_rosbag`: ROS 1 and ROS 2 (MCAP, sqlite3) bags, one stream per topic
+  (``rosbags`` is imported only when it is called).
 
 See ``docs/importers.md`` for the layouts, assumptions, citations and licenses.
 """
@@ -21,10 +23,12 @@ from slipkit.data.importers.biotacsp_dos import read_biotacsp_dos
 from slipkit.data.importers.bts3v2 import read_bts3v2
 from slipkit.data.importers.csv import read_csv_dataset
 from slipkit.data.importers.robotic_finger import read_robotic_finger
+from slipkit.data.importers.rosbag import read_rosbag
 
 __all__ = [
     "read_biotacsp_dos",
     "read_bts3v2",
     "read_csv_dataset",
     "read_robotic_finger",
+    "read_rosbag",
 ]
