@@ -319,15 +319,57 @@ def test_demo_refuses_to_rewrite_a_folder_that_is_not_a_demo(
 def test_a_demo_output_may_be_rewritten_but_not_with_foreign_files(
     tmp_path: Path,
 ) -> None:
-    """An earlier demo's output (data, compare, exports, report.md) is accepted for overwrite; one extra file makes it foreign."""
+    """An earlier demo's output (data, compare, exports, closedloop, report.md) is accepted for overwrite; one extra file makes it foreign."""
+    from slipkit import demo
+
     out = tmp_path / "demo"
-    for sub in ("data", "compare", "exports"):
+    for sub in (demo.DATA, demo.COMPARE, demo.EXPORTS, demo.CLOSEDLOOP):
         (out / sub).mkdir(parents=True)
-    (out / "report.md").write_text("# slipkit demo: which detector to deploy\n")
-    accepted = _files.check_out_path(out, kind="demo", overwrite=True)
+    (out / demo.CLOSEDLOOP / "fsr.log").write_text("closed loop fsr\n")
+    (out / demo.REPORT).write_text("# slipkit demo: which detector to deploy\n")
+    accepted = _files.check_out_path(out, layout=demo.LAYOUT, overwrite=True)
     (out / "thesis.tex").write_text("mine\n")
     with pytest.raises(SlipkitError, match="is not a slipkit demo"):
-        _files.check_out_path(out, kind="demo", overwrite=True)
+        _files.check_out_path(out, layout=demo.LAYOUT, overwrite=True)
+    assert out == accepted
+
+
+def test_the_demo_layout_names_every_entry_the_demo_writes() -> None:
+    """The demo-folder check knows closedloop/ beside data/, compare/, exports/ and report.md."""
+    from slipkit.demo import LAYOUT
+
+    assert {"data", "compare", "exports", "closedloop", "report.md"} == set(
+        LAYOUT.entries
+    )
+
+
+def test_a_folder_of_demo_names_with_other_content_is_not_a_demo(
+    tmp_path: Path,
+) -> None:
+    """A `report.md` of the user's own, or a file named `data`, is not a demo output."""
+    from slipkit.demo import LAYOUT
+
+    (tmp_path / "mine" / "data").mkdir(parents=True)
+    (tmp_path / "mine" / "report.md").write_text("# My thesis\n")
+    (tmp_path / "file-data").mkdir()
+    (tmp_path / "file-data" / "data").write_text("a file named like a demo folder\n")
+    assert (False, False) == (
+        LAYOUT.holds(tmp_path / "mine"),
+        LAYOUT.holds(tmp_path / "file-data"),
+    )
+
+
+def test_a_closedloop_output_is_replaced_only_when_it_is_one(tmp_path: Path) -> None:
+    """A folder as `slipkit closedloop` writes it may be overwritten (the demo's second run does); with a report of another title it may not."""
+    out = tmp_path / "cl"
+    out.mkdir()
+    (out / "results.csv").write_text("detector\n")
+    (out / "summary.csv").write_text("detector\n")
+    (out / "report.md").write_text("# Closed loop: fsr\n")
+    accepted = _files.check_out_path(out, kind="closedloop", overwrite=True)
+    (out / "report.md").write_text("# My notes\n")
+    with pytest.raises(SlipkitError, match="is not a slipkit closedloop"):
+        _files.check_out_path(out, kind="closedloop", overwrite=True)
     assert out == accepted
 
 
@@ -335,7 +377,9 @@ def test_a_demo_output_may_be_rewritten_but_not_with_foreign_files(
 def test_demo_rewrites_its_own_output(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """`slipkit demo` run twice into one out (overwrite defaults to true) replaces its own folders."""
+    """`slipkit demo` run twice into one out (overwrite defaults to true) rewrites its own folders, the closed loop included."""
+    from slipkit.demo import LAYOUT
+
     args = [
         "demo",
         f"out={tmp_path / 'demo'}",
@@ -344,10 +388,12 @@ def test_demo_rewrites_its_own_output(
         "progress=false",
         "~comparisons",
         "+comparisons={fsr: []}",
+        "quick_seeds=[0]",
     ]
-    codes = [_cli(args, capsys)[0] for _ in range(2)]
-    assert ([0, 0], ["compare", "data", "exports", "report.md"]) == (
-        codes,
+    runs = [_cli(args, capsys) for _ in range(2)]
+    assert ([0, 0], [False, False], sorted(LAYOUT.entries)) == (
+        [code for code, _ in runs],
+        ["skipped" in err for _, err in runs],
         sorted(p.name for p in (tmp_path / "demo").iterdir()),
     )
 
