@@ -454,7 +454,6 @@ def check_out_file(
     """
     path = Path(path)
     where = _where(option, path)
-    _check_inputs(path, inputs, option, what="write there")
     try:
         st = os.lstat(path)
     except FileNotFoundError:
@@ -482,6 +481,7 @@ def check_out_file(
                 f"{where}: is inside the slipkit {pkind} {parent}; refusing to write "
                 "into it (choose a file outside it)"
             )
+    _check_inputs(path, inputs, option, what="write there")
     if st is not None and not (is_own is not None and is_own(path)):
         raise SlipkitError(f"{where}: exists and is not {what}; refusing to replace it")
     return path
