@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from tests.robustness.test_write_safety import _docs, _snapshot
+from tests.robustness.test_write_safety import _cli, _docs, _snapshot
 from tests.runtime.helpers import linear_graph, manifest
 
 from slipkit import _files
@@ -221,4 +221,170 @@ def test_a_failed_single_file_write_names_the_option_and_leaves_no_folder(
     ) == (
         str(exc.value),
         sorted(p.name for p in tmp_path.iterdir()),
+    )
+
+
+# -- slipkit sweep: out and storage ------------------------------------------------------
+#: a tiny TacTip experiment (tests/train/test_sweep_optuna.py): < 1 s a trial
+TINY = [
+    "experiment=tactip_svm",
+    "dataset.n_trials=4",
+    "scene.model.n_pins=19",
+    "scene.model.duration_s=1.0",
+    "scene.model.onset_s=[0.4,0.7]",
+    "task.cv=2",
+    "search=tactip_svm",
+    "n_trials=1",
+]
+
+
+@pytest.fixture
+def sweep_lab(lab: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """The lab beside a dataset folder, a user's own SQLite database and a best.json of theirs; the working directory."""
+    import sqlite3
+
+    from tests.strategies import make_dataset
+
+    from slipkit.data.io import save_dataset
+
+    save_dataset(make_dataset(n_trials=2, n_frames=10), lab / "ds")
+    con = sqlite3.connect(lab / "mine.db")
+    con.execute("CREATE TABLE samples (x REAL)")
+    con.commit()
+    con.close()
+    (lab / "docs" / "best.json").write_text('{"my": "best result"}\n')
+    monkeypatch.chdir(lab)
+    return lab
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (
+            ["out=s", "storage=sqlite:///ds/study.db"],
+            "storage=ds/study.db: is inside the slipkit dataset ",
+        ),
+        (["out=bundle"], "out=bundle: exists and is not a slipkit sweep"),
+        (["out=docs"], "out=docs: exists and is not a slipkit sweep"),
+        (["out=ds/sweep"], "out=ds/sweep: is inside the slipkit dataset "),
+        (["out=s", "storage=sqlite://"], "storage=sqlite://: an in-memory database"),
+        (
+            ["out=s", "storage=sqlite:///:memory:"],
+            "storage=sqlite:///:memory:: an in-memory database",
+        ),
+        (
+            ["out=s", "storage='sqlite:///file:r.db?mode=ro&uri=true'"],
+            "opened read-only; a sweep writes its trials into the study",
+        ),
+        (
+            ["out=s", "storage=sqlite:///notes.txt"],
+            "storage=notes.txt: exists and is not an Optuna study database",
+        ),
+        (
+            ["out=s", "storage=sqlite:///mine.db"],
+            "storage=mine.db: exists and is not an Optuna study database",
+        ),
+        (
+            ["out=s", "storage=sqlite:///docs"],
+            "storage=docs: is a folder; refusing to replace it",
+        ),
+        (
+            ["out=s", "heartbeat_s=1e12", "grace_s=2e12"],
+            "heartbeat_s=1000000000000.0: expected a whole number in [1, 86400]",
+        ),
+        (["out=notes.txt/s"], "out=notes.txt/s: cannot create it: Not a directory"),
+    ],
+    ids=[
+        "db-in-dataset",
+        "out-bundle",
+        "out-docs",
+        "out-in-dataset",
+        "memory",
+        "memory-named",
+        "read-only-uri",
+        "db-is-notes",
+        "db-is-another-database",
+        "db-is-folder",
+        "heartbeat-overflow",
+        "out-under-a-file",
+    ],
+)
+def test_sweep_refuses_outs_it_did_not_write_before_creating_anything(
+    args: list[str],
+    message: str,
+    sweep_lab: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """`slipkit sweep` aimed at a dataset, a bundle, a user's folder, file or database, an in-memory or read-only study: exit 2 in one line, the lab byte-identical."""
+    before = _snapshot(sweep_lab)
+    code, err = _cli(["sweep", *TINY, *args], capsys)
+    assert (2, True, 1, before) == (
+        code,
+        message in err,
+        len(err.strip().splitlines()),
+        _snapshot(sweep_lab),
+    ), err
+
+
+def test_sweep_refuses_a_folder_or_database_it_cannot_write(
+    sweep_lab: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """A read-only sweep folder or study database is one line naming `out` / `storage`, exit 2, not an internal error."""
+    import tempfile
+
+    from slipkit.train import optuna_sweep
+
+    real = tempfile.TemporaryFile
+
+    def read_only(*args: Any, dir: Any = None, **kwargs: Any) -> Any:
+        if dir is not None and Path(dir).name == "s":
+            raise PermissionError(13, "Permission denied")
+        return real(*args, dir=dir, **kwargs)
+
+    assert 0 == _cli(["sweep", *TINY, "out=s"], capsys)[0]
+    monkeypatch.setattr(_files.tempfile, "TemporaryFile", read_only)
+    folder = _cli(["sweep", *TINY, "n_trials=2", "out=s"], capsys)
+    monkeypatch.undo()
+    monkeypatch.chdir(sweep_lab)
+    monkeypatch.setattr(optuna_sweep.os, "access", lambda *a, **k: False)
+    db = _cli(["sweep", *TINY, "n_trials=2", "out=s"], capsys)
+    assert (
+        (2, "slipkit sweep: error: out=s: cannot write there: Permission denied\n"),
+        (2, True),
+    ) == (folder, (db[0], "/s/study.db: the database file is read-only" in db[1]))
+
+
+def test_a_study_database_that_refuses_writes_is_named(tmp_path: Path) -> None:
+    """Joining a study in a database that cannot be written is a one-line error naming `storage`."""
+    from slipkit.train import optuna_sweep
+
+    db = tmp_path / "study.db"
+    kw = {"heartbeat_s": 60, "grace_s": 180, "max_retry": 1}
+    optuna_sweep.open_storage(f"sqlite:///{db}", **kw)  # an empty Optuna database
+    url = f"sqlite:///file:{db}?mode=ro&uri=true"
+    storage = optuna_sweep.open_storage(url, **kw)
+    obj = optuna_sweep.Objective("validation.accuracy", "maximize")
+    with pytest.raises(_files.SlipkitError) as exc:
+        optuna_sweep._joined_study(storage, "s", url, obj, 0, {})
+    text = str(exc.value)
+    assert (True, True) == (
+        text.startswith("storage=sqlite:///"),
+        text.endswith("cannot write the study: attempt to write a readonly database"),
+    )
+
+
+def test_sweep_resumes_in_its_own_folder(
+    sweep_lab: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A second `slipkit sweep` into its own out (study.db, trials/, best.json) joins the study and adds its trial."""
+    first = _cli(["sweep", *TINY, "out=s"], capsys)[0]
+    second = _cli(["sweep", *TINY, "n_trials=2", "out=s"], capsys)[0]
+    best = json.loads((sweep_lab / "s" / "best.json").read_text())
+    assert (0, 0, 2, ["0000", "0001"]) == (
+        first,
+        second,
+        best["n_complete"],
+        sorted(p.name for p in (sweep_lab / "s" / "trials").iterdir()),
     )
