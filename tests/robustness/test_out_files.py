@@ -388,3 +388,27 @@ def test_sweep_resumes_in_its_own_folder(
         best["n_complete"],
         sorted(p.name for p in (sweep_lab / "s" / "trials").iterdir()),
     )
+
+
+# -- slipkit train -m: the multirun's summary files ---------------------------------------
+def test_a_multirun_summary_never_replaces_a_users_best_json(tmp_path: Path) -> None:
+    """A sweep folder (hydra.sweep.dir) holding the user's own best.json: the summary is refused naming it, the file kept."""
+    from slipkit.train.sweep import JOB_FILE, summarise_sweep
+
+    (tmp_path / "0").mkdir()
+    job = {
+        "job": 0,
+        "run_dir": str(tmp_path / "run"),
+        "overrides": ["seed=0"],
+        "objective": {"name": "validation.x", "direction": "maximize", "value": 1.0},
+    }
+    (tmp_path / "0" / JOB_FILE).write_text(json.dumps(job))
+    (tmp_path / "best.json").write_bytes(NOTES)
+    with pytest.raises(_files.SlipkitError) as exc:
+        summarise_sweep(tmp_path)
+    assert (True, NOTES) == (
+        str(exc.value).endswith(
+            "exists and is not a multirun best.json; refusing to replace it"
+        ),
+        (tmp_path / "best.json").read_bytes(),
+    )
