@@ -756,23 +756,21 @@ def sweep_main(
             "worker's trial would look dead between two heartbeats)"
         )
     name = check_plain_name(str(cfg.study_name), option="study_name")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise SlipkitError(
-            f"out={out}: cannot create it: {exc.strerror or exc}"
-        ) from None
-    check_writable(out, option="out")
-    if not given:  # <out>/study.db: checked once out is known to be a folder
-        db = check_storage(url, inputs)
-    if db is not None and db.parent.resolve() != out.resolve():
-        check_writable(db.parent, option="storage")
+    sqlite = url.startswith("sqlite")
+    if sqlite:  # the database file is made when the storage opens: out first
+        _make_out(out)
+        if not given:  # <out>/study.db: checked once out is known to be a folder
+            db = check_storage(url, inputs)
+        if db is not None and db.parent.resolve() != out.resolve():
+            check_writable(db.parent, option="storage")
     storage = open_storage(
         url,
         heartbeat_s=int(cfg.heartbeat_s),
         grace_s=int(cfg.grace_s),
         max_retry=int(cfg.max_retry),
     )
+    if not sqlite:  # a server database: out once the storage is known to open
+        _make_out(out)
     # ERROR: a trial that fails raises through to the CLI's one line anyway.
     optuna.logging.set_verbosity(optuna.logging.ERROR)
     study = _joined_study(
@@ -875,6 +873,17 @@ def sweep_main(
     )
     print(out / BEST_FILE)
     return record
+
+
+def _make_out(out: Path) -> None:
+    """Create ``out`` (checked by :data:`LAYOUT` already) and check it can be written."""
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise SlipkitError(
+            f"out={out}: cannot create it: {exc.strerror or exc}"
+        ) from None
+    check_writable(out, option="out")
 
 
 def _joined_study(
