@@ -16,6 +16,12 @@ Every command that writes goes through two guards here (``docs/robustness.md``,
 * :func:`atomic_dir` (the write itself) checks the same target rules again, restores
   or reports what an interrupted earlier write left behind, and never leaves the name
   empty: an overwrite that fails between its two renames puts the old folder back.
+
+Options naming one file (``slipkit-run --json``, a sweep's ``best.json``, an SQLite
+study) go through :func:`check_out_file` before any work and :func:`write_out_file` at
+the write: never an input, a folder, a symlink, a FIFO, a device or a socket, never
+inside a dataset, run or bundle, and an existing file only when it is recognisably what
+the command writes there.
 """
 
 from __future__ import annotations
@@ -29,7 +35,8 @@ import os
 import shutil
 import stat
 import tempfile
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from slipkit.errors import SlipkitError
@@ -48,13 +55,56 @@ BUNDLE_FORMAT = "slipkit-bundle"
 
 #: Kinds recognised by a manifest: a folder inside one of them is never written into.
 MANIFEST_KINDS = ("dataset", "run", "bundle")
-#: Every kind a command writes.
-KINDS = (*MANIFEST_KINDS, "evaluation", "comparison", "demo", "lerobot")
+#: Every kind a command writes (``demo`` and ``sweep``: recognised by their :class:`Layout`).
+KINDS = (
+    *MANIFEST_KINDS,
+    "evaluation",
+    "comparison",
+    "closedloop",
+    "demo",
+    "sweep",
+    "lerobot",
+)
 #: ``format`` of ``meta/slipkit.json`` in a LeRobot dataset that ``slipkit
 #: export-dataset`` wrote (= ``slipkit.data.lerobot.MARKER_FORMAT``).
 LEROBOT_FORMAT = "slipkit-lerobot"
-#: What a ``slipkit demo`` output folder holds (``configs/demo.yaml``).
-DEMO_ENTRIES = frozenset({"data", "compare", "exports", "report.md"})
+#: Largest file read to recognise it (a summary or ``best.json`` is a few kB).
+MAX_RECOGNISED_BYTES = 16 << 20
+
+
+@dataclass(frozen=True)
+class Layout:
+    """What a command writes into its output folder, by name (``slipkit demo``, ``sweep``).
+
+    Defined by the command beside the code that writes those names, and handed to
+    :func:`check_out_path` (``layout=``): a folder is that command's earlier output,
+    which it may write into again, when it holds some of ``entries`` and nothing else
+    (hidden names aside: slipkit's own temporary ones), and each entry present passes
+    its test in ``marks``.
+
+    Attributes
+    ----------
+    kind : str
+        One of :data:`KINDS`, for the messages (``is not a slipkit demo``).
+    entries : frozenset of str
+        Every name the command writes directly under its output folder.
+    marks : mapping of str to callable
+        Entry name -> ``test(path) -> bool`` (a report's title, a folder, a JSON marker).
+    """
+
+    kind: str
+    entries: frozenset[str]
+    marks: Mapping[str, Callable[[Path], bool]] = field(default_factory=dict)
+
+    def holds(self, path: Path | str) -> bool:
+        """Whether ``path`` is a folder this layout recognises (see the class docstring)."""
+        path = Path(path)
+        if path.is_symlink() or not path.is_dir():
+            return False
+        names = {p.name for p in path.iterdir() if not p.name.startswith(".")}
+        if not names or not names <= self.entries:
+            return False
+        return all(test(path / n) for n, test in self.marks.items() if n in names)
 
 
 def sha256_bytes(data: bytes) -> str:
@@ -81,8 +131,28 @@ def _json_field(path: Path, key: str) -> object:
     return obj.get(key) if isinstance(obj, dict) else None
 
 
-def _first_line(path: Path) -> str:
+def read_json_object(path: Path | str) -> dict[str, object] | None:
+    """The JSON object in the regular file ``path``; None when it is anything else.
+
+    None for a missing, unreadable, non-regular (FIFO, device) or larger than
+    :data:`MAX_RECOGNISED_BYTES` file, and for JSON that is not an object: what
+    recognisers of slipkit's own files call (a FIFO is never opened, so never waited on).
+    """
     try:
+        st = os.stat(path)
+        if not stat.S_ISREG(st.st_mode) or st.st_size > MAX_RECOGNISED_BYTES:
+            return None
+        obj = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return None
+    return obj if isinstance(obj, dict) else None
+
+
+def first_line(path: Path | str) -> str:
+    """The first line of the regular text file ``path``; ``""`` for anything else."""
+    try:
+        if not stat.S_ISREG(os.stat(path).st_mode):
+            return ""
         with open(path, encoding="utf-8") as fh:
             return fh.readline()
     except (OSError, UnicodeDecodeError):
@@ -115,10 +185,12 @@ def folder_kind(path: Path | str) -> str | None:
     ``evaluation``: ``<run>/evaluations/<name>`` holding a ``metrics.json`` with
     ``run`` and ``dataset`` (what ``slipkit evaluate`` writes); ``comparison``: a
     ``report.md`` titled ``# Comparison:`` beside ``metrics.csv`` (``slipkit
-    compare``); ``demo``: a folder holding only ``data/``, ``compare/``, ``exports/``
-    and ``report.md`` (``slipkit demo``; an interrupted demo may lack some of them);
-    ``lerobot``: a LeRobot dataset whose ``meta/slipkit.json`` says slipkit wrote it
-    (``slipkit export-dataset``; a LeRobot dataset from any other tool is not one).
+    compare``); ``closedloop``: a ``report.md`` titled ``# Closed loop:`` beside
+    ``summary.csv`` and ``results.csv`` (``slipkit closedloop``); ``lerobot``: a LeRobot
+    dataset whose ``meta/slipkit.json`` says slipkit wrote it (``slipkit export-dataset``;
+    a LeRobot dataset from any other tool is not one). A demo's or a sweep's folder is
+    recognised by the command's own :class:`Layout` (``slipkit.demo.LAYOUT``,
+    ``slipkit.train.optuna_sweep.LAYOUT``).
     """
     path = Path(path)
     kind = manifest_kind(path)
@@ -134,15 +206,16 @@ def folder_kind(path: Path | str) -> str | None:
         and isinstance(_json_field(metrics, "dataset"), dict)
     ):
         return "evaluation"
-    if (path / "metrics.csv").is_file() and _first_line(path / "report.md").startswith(
+    if (path / "metrics.csv").is_file() and first_line(path / "report.md").startswith(
         "# Comparison:"
     ):
         return "comparison"
-    entries = {p.name for p in path.iterdir() if not p.name.startswith(".")}
-    if entries and entries <= DEMO_ENTRIES:
-        report = path / "report.md"
-        if not report.exists() or _first_line(report).startswith("# slipkit demo"):
-            return "demo"
+    if (
+        (path / "summary.csv").is_file()
+        and (path / "results.csv").is_file()
+        and first_line(path / "report.md").startswith("# Closed loop:")
+    ):
+        return "closedloop"
     return None
 
 
@@ -207,9 +280,12 @@ def _check_target(
     kind: str | None,
     option: str | None,
     inside: Path | str | None,
+    layout: Layout | None = None,
 ) -> None:
     """The rules on the folder itself: same-kind overwrite, never inside a slipkit folder."""
     where = _where(option, target)
+    if layout is not None:
+        kind = layout.kind
     if target.is_symlink():
         raise SlipkitError(
             f"{where}: is a symbolic link; refusing to replace it (name the folder itself)"
@@ -225,7 +301,12 @@ def _check_target(
                 f"{where}: exists and is not {what} (a file); refusing to replace it"
             )
         empty = not any(target.iterdir())
-        if not empty and (kind is None or folder_kind(target) != kind):
+        same = (
+            layout.holds(target)
+            if layout is not None
+            else kind is not None and folder_kind(target) == kind
+        )
+        if not empty and not same:
             raise SlipkitError(
                 f"{where}: exists and is not {what}; refusing to replace it"
             )
@@ -249,6 +330,7 @@ def check_out_path(
     kind: str | None = None,
     overwrite: bool = False,
     inside: Path | str | None = None,
+    layout: Layout | None = None,
 ) -> Path:
     """Refuse an output folder that could destroy data; return ``out`` as a Path.
 
@@ -277,6 +359,9 @@ def check_out_path(
         Whether the user asked to replace an existing ``out``.
     inside : path-like, optional
         A slipkit folder ``out`` may sit inside.
+    layout : Layout, optional
+        What the command writes into ``out`` (its ``kind`` replaces ``kind``): an
+        existing ``out`` it :meth:`~Layout.holds` is accepted (with ``overwrite``).
 
     Raises
     ------
@@ -284,6 +369,26 @@ def check_out_path(
         Naming ``option``, ``out`` and the rule it breaks.
     """
     out = Path(out)
+    _check_inputs(out, inputs, option, what="write there")
+    _check_target(
+        out,
+        overwrite=overwrite,
+        kind=kind,
+        option=option,
+        inside=inside,
+        layout=layout,
+    )
+    return out
+
+
+def _check_inputs(
+    out: Path,
+    inputs: Mapping[str, Path | str | None] | None,
+    option: str,
+    *,
+    what: str,
+) -> None:
+    """``out`` is not, is not inside and does not contain any of ``inputs``."""
     where = _where(option, out)
     res = _resolved(out)
     for name, given in (inputs or {}).items():
@@ -292,7 +397,7 @@ def check_out_path(
         inp = _resolved(given)
         relation = (
             "is"
-            if inp == res
+            if inp == res or _same_file(out, given)
             else "is inside"
             if inp in res.parents
             else "contains"
@@ -301,26 +406,90 @@ def check_out_path(
         )
         if relation:
             raise SlipkitError(
-                f"{where}: {relation} the input {name}={given}; refusing to write "
-                "there (an output never replaces or enters its own input)"
+                f"{where}: {relation} the input {name}={given}; refusing to {what} "
+                "(an output never replaces or enters its own input)"
             )
-    _check_target(out, overwrite=overwrite, kind=kind, option=option, inside=inside)
-    return out
 
 
-def check_out_file(path: Path | str, *, option: str) -> Path:
+def _same_file(a: Path | str, b: Path | str) -> bool:
+    """Whether ``a`` and ``b`` exist and are one file (same inode: a hard link too)."""
+    try:
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):
+        return False
+
+
+#: ``stat`` file types that are never written to, by what a message calls them
+_SPECIAL = (
+    (stat.S_ISFIFO, "a FIFO (named pipe)"),
+    (stat.S_ISSOCK, "a socket"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+)
+
+
+def check_out_file(
+    path: Path | str,
+    *,
+    option: str,
+    inputs: Mapping[str, Path | str | None] | None = None,
+    is_own: Callable[[Path], bool] | None = None,
+    what: str = "a file slipkit writes there",
+) -> Path:
     """Refuse a single output file that could destroy data; return it as a Path.
 
-    For options naming one file (``slipkit-run --json``): it may replace an existing
-    file (a summary written again), but not a folder or a symlink, and it must not sit
-    inside a dataset, run or bundle folder (it would break their checksums).
+    For options naming one file (``slipkit-run --json``, a sweep's ``best.json`` or
+    SQLite study). Call it before any work; :func:`write_out_file` checks again at
+    the write. The rules:
+
+    * ``path`` is not one of ``inputs`` (the same file, a hard link included) and not
+      inside one of them;
+    * ``path`` is not a symbolic link, a folder, a FIFO, a socket or a device;
+    * ``path`` does not sit inside a dataset, run or bundle (it would break their
+      checksums);
+    * an existing regular file is replaced only when ``is_own(path)`` says it is what
+      the command writes there (a summary written again); without ``is_own`` never.
+
+    Parameters
+    ----------
+    path : path-like
+        The file the command will write.
+    option : str
+        The option that named it, for the message (``--json``).
+    inputs : mapping of str to path-like, optional
+        The command's inputs, by option name; None entries are skipped.
+    is_own : callable, optional
+        ``is_own(path) -> bool``: an existing file the command may replace.
+    what : str
+        What ``is_own`` recognises, for the message (``a slipkit-run summary``).
+
+    Raises
+    ------
+    SlipkitError
+        ``<option>=<path>: <the rule it breaks>``.
     """
     path = Path(path)
     where = _where(option, path)
-    if path.is_symlink() or path.is_dir():
-        raise SlipkitError(
-            f"{where}: is a folder or a symbolic link; refusing to replace it"
-        )
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        st = None
+    except (OSError, ValueError) as exc:  # a NUL byte, a parent that is a file
+        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+        raise SlipkitError(f"{where}: cannot be written: {why}") from None
+    if st is not None:
+        if stat.S_ISLNK(st.st_mode):
+            raise SlipkitError(
+                f"{where}: is a symbolic link; refusing to replace it "
+                "(name the file itself)"
+            )
+        if stat.S_ISDIR(st.st_mode):
+            raise SlipkitError(f"{where}: is a folder; refusing to replace it")
+        for test, name in _SPECIAL:
+            if test(st.st_mode):
+                raise SlipkitError(
+                    f"{where}: is {name}, not a regular file; refusing to write to it"
+                )
     for parent in _resolved(path).parents:
         pkind = manifest_kind(parent)
         if pkind is not None:
@@ -328,7 +497,55 @@ def check_out_file(path: Path | str, *, option: str) -> Path:
                 f"{where}: is inside the slipkit {pkind} {parent}; refusing to write "
                 "into it (choose a file outside it)"
             )
+    _check_inputs(path, inputs, option, what="write there")
+    if st is not None and not (is_own is not None and is_own(path)):
+        raise SlipkitError(f"{where}: exists and is not {what}; refusing to replace it")
     return path
+
+
+def write_out_file(
+    path: Path | str,
+    text: str,
+    *,
+    option: str,
+    inputs: Mapping[str, Path | str | None] | None = None,
+    is_own: Callable[[Path], bool] | None = None,
+    what: str = "a file slipkit writes there",
+) -> Path:
+    """Check ``path`` again (:func:`check_out_file`), then write ``text`` atomically.
+
+    Checked again because the command ran in between (a replay, a study) and the name
+    may have changed meanwhile. Written through a temporary file in the same folder
+    and a rename (:func:`atomic_write_text`); parent folders it creates are removed
+    again when the write fails. An operating-system error (a read-only folder, a full
+    disk) is a :class:`SlipkitError` naming ``option`` and the path.
+    """
+    path = check_out_file(path, option=option, inputs=inputs, is_own=is_own, what=what)
+    created = [p for p in (path.parent, *path.parent.parents) if not p.exists()]
+    try:
+        atomic_write_text(path, text)
+    except (OSError, ValueError) as exc:
+        for parent in created:  # deepest first; one that holds anything stays
+            with contextlib.suppress(OSError):
+                parent.rmdir()
+        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+        raise SlipkitError(f"{_where(option, path)}: cannot write it: {why}") from None
+    return path
+
+
+def check_writable(folder: Path | str, *, option: str) -> None:
+    """Refuse a folder the command cannot create files in, naming ``option``.
+
+    Tried with an anonymous temporary file (``O_TMPFILE`` where the system has it:
+    no name ever appears), not :func:`os.access`, which ignores read-only mounts and
+    says yes to root.
+    """
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as exc:
+        why = exc.strerror or exc
+        raise SlipkitError(f"{option}={folder}: cannot write there: {why}") from None
 
 
 # -- leftovers of interrupted writes ------------------------------------------------------

@@ -180,8 +180,9 @@ OPTIONS: dict[str, dict[str, Rule]] = {
         "study_name": NAME,
         "out": PATH,
         "storage": TEXT.null(),
-        "heartbeat_s": COUNT,
-        "grace_s": COUNT,
+        # bounded: a timer of 1e12 s overflows in Optuna's heartbeat thread
+        "heartbeat_s": whole(1, 86_400),
+        "grace_s": whole(1, 7 * 86_400),
         "max_retry": whole(0),
     },
     "export": {

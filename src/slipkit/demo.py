@@ -41,10 +41,36 @@ from hydra import compose
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
-from slipkit._files import atomic_dir, atomic_write_text, check_out_path
+from slipkit._files import (
+    Layout,
+    atomic_dir,
+    atomic_write_text,
+    check_out_path,
+    first_line,
+)
 from slipkit.data.io import load_dataset, save_dataset
 from slipkit.errors import SlipkitError
 from slipkit.sim.commands import build_scene
+
+#: What the demo writes into ``out``, and nothing else: every stage below names its
+#: entry from here, and an existing ``out`` holding only these (the report titled
+#: :data:`REPORT_TITLE`) is an earlier demo, which the demo rewrites (:data:`LAYOUT`).
+DATA, COMPARE, EXPORTS, CLOSEDLOOP, REPORT = (
+    "data",
+    "compare",
+    "exports",
+    "closedloop",
+    "report.md",
+)
+REPORT_TITLE = "# slipkit demo"
+LAYOUT = Layout(
+    "demo",
+    frozenset({DATA, COMPARE, EXPORTS, CLOSEDLOOP, REPORT}),
+    marks={
+        **{name: Path.is_dir for name in (DATA, COMPARE, EXPORTS, CLOSEDLOOP)},
+        REPORT: lambda path: first_line(path).startswith(REPORT_TITLE),
+    },
+)
 
 
 def demo_seeds(cfg: DictConfig) -> list[int]:
@@ -178,7 +204,7 @@ def _run_closedloop(
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
         closedloop_main(ccfg)
-    (out.parent / f"{name}.log").write_text(buf.getvalue())
+    atomic_write_text(out.parent / f"{name}.log", buf.getvalue())
     return pd.read_csv(out / "summary.csv")
 
 
@@ -201,7 +227,7 @@ def demo_main(cfg: DictConfig) -> Path:
     check_out_path(
         out,
         inputs={f"real.{src}": path for src, path in present.items()},
-        kind="demo",
+        layout=LAYOUT,
         overwrite=bool(cfg.overwrite),
     )
     out.mkdir(parents=True, exist_ok=True)
@@ -221,7 +247,7 @@ def demo_main(cfg: DictConfig) -> Path:
                 int(comp.dataset.n_trials),
                 int(comp.dataset.seed) + s,
             )
-            scenes.setdefault(key, out / "data" / f"{key[0]}-n{key[1]}-s{key[2]}")
+            scenes.setdefault(key, out / DATA / f"{key[0]}-n{key[1]}-s{key[2]}")
     for (scene_name, n, seed), path in tqdm(
         list(scenes.items()), desc="1/7 simulate", unit="scene", disable=not show
     ):
@@ -282,7 +308,7 @@ def demo_main(cfg: DictConfig) -> Path:
             ).source
         )
         path = save_dataset(
-            reader(src_path), out / "data" / source, overwrite=bool(cfg.overwrite)
+            reader(src_path), out / DATA / source, overwrite=bool(cfg.overwrite)
         )
         imported[source] = path
         datasets.append(_row(path, "recorded", time.perf_counter() - t0))
@@ -306,12 +332,12 @@ def demo_main(cfg: DictConfig) -> Path:
     ):
         t0 = time.perf_counter()
         with atomic_dir(
-            out / "compare" / family, overwrite=True, kind="comparison"
+            out / COMPARE / family, overwrite=True, kind="comparison"
         ) as tmp:
             results[family] = run_comparison(
                 ccfg, tmp, progress=False, data=data_of.get(family)
             )
-        results[family].folder = out / "compare" / family
+        results[family].folder = out / COMPARE / family
         results[family].report = results[family].folder / "report.md"
         compare_s[family] = time.perf_counter() - t0
     stage_s["compare"] = time.perf_counter() - t_stage
@@ -343,7 +369,7 @@ def demo_main(cfg: DictConfig) -> Path:
         best[family]["primary"] = str(res.table.attrs.get("primary", ""))
         if row["export"] != "ok":
             continue
-        bundle = out / "exports" / family
+        bundle = out / EXPORTS / family
         exported[family] = export_run(
             res.run_dir(str(row["estimator"])),
             bundle,
@@ -378,7 +404,7 @@ def demo_main(cfg: DictConfig) -> Path:
         )
         try:
             summary = _run_closedloop(
-                cfg, name, [*overrides, *drop], out / "closedloop" / name
+                cfg, name, [*overrides, *drop], out / CLOSEDLOOP / name
             )
         except SlipkitError as exc:
             # one scenario that cannot run (e.g. its detector's bundle fails the export
@@ -546,7 +572,7 @@ def _write_index(
 ) -> Path:
     n = len(seeds)
     lines = [
-        "# slipkit demo: which detector to deploy for each sensor",
+        f"{REPORT_TITLE}: which detector to deploy for each sensor",
         "",
         *family_table(results, best, closed),
         "",
@@ -627,7 +653,7 @@ def _write_index(
         "```",
         "",
     ]
-    path = out / "report.md"
+    path = out / REPORT
     atomic_write_text(path, "\n".join(lines))
     return path
 

@@ -14,6 +14,7 @@ import logging
 import os
 import shutil
 import signal
+import stat
 import subprocess
 import sys
 import textwrap
@@ -51,18 +52,22 @@ def _cli(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str]
 
 
 def _snapshot(root: Path) -> dict[str, Any]:
-    """Every path under ``root`` -> its bytes (files), its target (links) or None (folders)."""
+    """Every path under ``root`` -> its bytes (files), its target (links), None (folders),
+    or its type and inode (a FIFO, socket or device: never opened)."""
     out: dict[str, Any] = {}
     for here, dirs, files in os.walk(root):
         for name in dirs + files:
             p = Path(here) / name
             rel = p.relative_to(root).as_posix()
+            st = p.lstat()
             out[rel] = (
                 ("link", os.readlink(p))
-                if p.is_symlink()
+                if stat.S_ISLNK(st.st_mode)
                 else None
-                if p.is_dir()
+                if stat.S_ISDIR(st.st_mode)
                 else p.read_bytes()
+                if stat.S_ISREG(st.st_mode)
+                else ("special", stat.S_IFMT(st.st_mode), st.st_ino)
             )
     return out
 
@@ -319,15 +324,57 @@ def test_demo_refuses_to_rewrite_a_folder_that_is_not_a_demo(
 def test_a_demo_output_may_be_rewritten_but_not_with_foreign_files(
     tmp_path: Path,
 ) -> None:
-    """An earlier demo's output (data, compare, exports, report.md) is accepted for overwrite; one extra file makes it foreign."""
+    """An earlier demo's output (data, compare, exports, closedloop, report.md) is accepted for overwrite; one extra file makes it foreign."""
+    from slipkit import demo
+
     out = tmp_path / "demo"
-    for sub in ("data", "compare", "exports"):
+    for sub in (demo.DATA, demo.COMPARE, demo.EXPORTS, demo.CLOSEDLOOP):
         (out / sub).mkdir(parents=True)
-    (out / "report.md").write_text("# slipkit demo: which detector to deploy\n")
-    accepted = _files.check_out_path(out, kind="demo", overwrite=True)
+    (out / demo.CLOSEDLOOP / "fsr.log").write_text("closed loop fsr\n")
+    (out / demo.REPORT).write_text("# slipkit demo: which detector to deploy\n")
+    accepted = _files.check_out_path(out, layout=demo.LAYOUT, overwrite=True)
     (out / "thesis.tex").write_text("mine\n")
     with pytest.raises(SlipkitError, match="is not a slipkit demo"):
-        _files.check_out_path(out, kind="demo", overwrite=True)
+        _files.check_out_path(out, layout=demo.LAYOUT, overwrite=True)
+    assert out == accepted
+
+
+def test_the_demo_layout_names_every_entry_the_demo_writes() -> None:
+    """The demo-folder check knows closedloop/ beside data/, compare/, exports/ and report.md."""
+    from slipkit.demo import LAYOUT
+
+    assert {"data", "compare", "exports", "closedloop", "report.md"} == set(
+        LAYOUT.entries
+    )
+
+
+def test_a_folder_of_demo_names_with_other_content_is_not_a_demo(
+    tmp_path: Path,
+) -> None:
+    """A `report.md` of the user's own, or a file named `data`, is not a demo output."""
+    from slipkit.demo import LAYOUT
+
+    (tmp_path / "mine" / "data").mkdir(parents=True)
+    (tmp_path / "mine" / "report.md").write_text("# My thesis\n")
+    (tmp_path / "file-data").mkdir()
+    (tmp_path / "file-data" / "data").write_text("a file named like a demo folder\n")
+    assert (False, False) == (
+        LAYOUT.holds(tmp_path / "mine"),
+        LAYOUT.holds(tmp_path / "file-data"),
+    )
+
+
+def test_a_closedloop_output_is_replaced_only_when_it_is_one(tmp_path: Path) -> None:
+    """A folder as `slipkit closedloop` writes it may be overwritten (the demo's second run does); with a report of another title it may not."""
+    out = tmp_path / "cl"
+    out.mkdir()
+    (out / "results.csv").write_text("detector\n")
+    (out / "summary.csv").write_text("detector\n")
+    (out / "report.md").write_text("# Closed loop: fsr\n")
+    accepted = _files.check_out_path(out, kind="closedloop", overwrite=True)
+    (out / "report.md").write_text("# My notes\n")
+    with pytest.raises(SlipkitError, match="is not a slipkit closedloop"):
+        _files.check_out_path(out, kind="closedloop", overwrite=True)
     assert out == accepted
 
 
@@ -335,7 +382,9 @@ def test_a_demo_output_may_be_rewritten_but_not_with_foreign_files(
 def test_demo_rewrites_its_own_output(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """`slipkit demo` run twice into one out (overwrite defaults to true) replaces its own folders."""
+    """`slipkit demo` run twice into one out (overwrite defaults to true) rewrites its own folders, the closed loop included."""
+    from slipkit.demo import LAYOUT
+
     args = [
         "demo",
         f"out={tmp_path / 'demo'}",
@@ -344,10 +393,12 @@ def test_demo_rewrites_its_own_output(
         "progress=false",
         "~comparisons",
         "+comparisons={fsr: []}",
+        "quick_seeds=[0]",
     ]
-    codes = [_cli(args, capsys)[0] for _ in range(2)]
-    assert ([0, 0], ["compare", "data", "exports", "report.md"]) == (
-        codes,
+    runs = [_cli(args, capsys) for _ in range(2)]
+    assert ([0, 0], [False, False], sorted(LAYOUT.entries)) == (
+        [code for code, _ in runs],
+        ["skipped" in err for _, err in runs],
         sorted(p.name for p in (tmp_path / "demo").iterdir()),
     )
 
@@ -726,32 +777,119 @@ def test_commands_touch_nothing_but_their_own_out(
     }
 
 
-def test_hostile_outs_in_a_lab_tree_change_nothing(
-    lab: dict[str, Path],
-    tmp_path: Path,
-    monkeypatch: pytest.MonkeyPatch,
-    capsys: pytest.CaptureFixture[str],
-) -> None:
-    """Every write option of every command aimed at a file or folder it did not write is refused; the tree stays byte-identical."""
+@pytest.fixture
+def lab_tree(
+    lab: dict[str, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> Path:
+    """The lab (a dataset, a run, a bundle, documents) beside a CSV recording, a readme,
+    a best.json of the user's, a replay file, a symlink and a FIFO; the working directory."""
     tree = tmp_path / "lab"
     _csv_source(tree / "csv")
     (tree / "readme.txt").write_text("keep me\n")
     (tree / "link-to-docs").symlink_to(tree / "docs")
-    before = _snapshot(tree)
+    (tree / "best.json").write_text('{"my": "best result"}\n')
+    shutil.copy(lab["bundle"] / "replay.npz", tree / "r.npz")
+    os.mkfifo(tree / "fifo")
     monkeypatch.chdir(tree)
-    hostile = [
+    return tree
+
+
+#: per command: its write options aimed at what it did not write (run in ``lab_tree``)
+HOSTILE = {
+    "evaluate": [
         ["evaluate", "run=run", "dataset=sim", "name=../../docs"],
-        ["evaluate", "run=run", "dataset=sim", f"name={tree / 'docs'}"],
+        ["evaluate", "run=run", "dataset=sim", "name=<abs>/docs"],
+        ["evaluate", "run=run", "dataset=sim", "name=../../fifo"],
+    ],
+    "import": [
         ["import", *CSV_OPTS, "path=csv", "out=csv", *OVER],
         ["import", *CSV_OPTS, "path=csv", "out=docs", *OVER],
+        ["import", *CSV_OPTS, "path=csv", "out=fifo", *OVER],
+    ],
+    "simulate": [
         ["simulate", *SIM_OPTS, "out=readme.txt", *OVER],
         ["simulate", *SIM_OPTS, "out=link-to-docs", *OVER],
         ["simulate", *SIM_OPTS, "out=sim/streams/x.parquet"],
+        ["simulate", *SIM_OPTS, "out=fifo", *OVER],
+    ],
+    "train": [
         ["train", "experiment=fsr_roc", "dataset.path=sim", "run_dir=sim", *OVER],
+        ["train", "experiment=fsr_roc", "dataset.path=sim", "run_dir=docs", *OVER],
+        ["train", "experiment=fsr_roc", "dataset.path=sim", "run_dir=fifo", *OVER],
+    ],
+    "export": [
         ["export", "run=run", "out=docs", *OVER],
         ["export", "run=run", "out=run/bundle"],
+        ["export", "run=run", "out=fifo", *OVER],
+    ],
+    "compare+demo": [
         ["compare", "comparison=fsr", "out=docs", "progress=false", *OVER],
+        ["compare", "comparison=fsr", "out=fifo", "progress=false", *OVER],
         ["demo", "out=docs", "quick=true", "progress=false"],
+        ["demo", "out=fifo", "quick=true", "progress=false"],
+    ],
+}
+
+
+@pytest.mark.parametrize("command", list(HOSTILE))
+def test_hostile_outs_in_a_lab_tree_change_nothing(
+    command: str, lab_tree: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Every write option of simulate, import, train, evaluate, export, compare and demo aimed at a file, folder, FIFO or slipkit folder it did not write exits 2; the tree stays byte-identical."""
+    before = _snapshot(lab_tree)
+    hostile = [
+        [a.replace("<abs>", str(lab_tree)) for a in args] for args in HOSTILE[command]
     ]
     refused = [_cli(args, capsys)[0] for args in hostile]
-    assert ([2] * len(hostile), before) == (refused, _snapshot(tree))
+    assert ([2] * len(hostile), before) == (refused, _snapshot(lab_tree))
+
+
+#: a tiny `slipkit sweep` (tests/train/test_sweep_optuna.py): refused before its first trial
+SWEEP = [
+    "sweep",
+    "experiment=tactip_svm",
+    "dataset.n_trials=4",
+    "task.cv=2",
+    "search=tactip_svm",
+    "n_trials=1",
+]
+
+
+def test_hostile_sweep_closedloop_and_json_outs_in_a_lab_tree_change_nothing(
+    lab_tree: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """sweep's out and storage, closedloop's out and slipkit-run's --json aimed at what they did not write (a user's file or folder, a FIFO, a dataset, a bundle, an input) exit 2; the tree stays byte-identical."""
+    from slipkit.runtime.cli import main as run_main
+
+    before = _snapshot(lab_tree)
+    hostile = [
+        ["closedloop", "scenario=fsr", "out=docs", *OVER],
+        ["closedloop", "scenario=fsr", "out=fifo", *OVER],
+        ["closedloop", "scenario=fsr", "out=sim/loop"],
+        [*SWEEP, "out=docs"],
+        [*SWEEP, "out=."],
+        [*SWEEP, "out=bundle"],
+        [*SWEEP, "out=sim/sweep"],
+        [*SWEEP, "out=fifo"],
+        [*SWEEP, "out=new", "storage=sqlite:///sim/study.db"],
+        [*SWEEP, "out=new", "storage=sqlite:///readme.txt"],
+        [*SWEEP, "out=new", "storage=sqlite:///fifo"],
+        [*SWEEP, "out=new", "storage=sqlite://"],
+    ]
+    runs = [
+        ["bundle", "--json", "readme.txt"],
+        ["bundle", "--json", "best.json"],
+        ["bundle", "--json", "fifo"],
+        ["bundle", "--json", "docs"],
+        ["bundle", "--json", "link-to-docs"],
+        ["bundle", "--json", "bundle/manifest.json"],
+        ["bundle", "--json", "bundle/replay.npz"],
+        ["bundle", "--replay", "r.npz", "--json", "r.npz"],
+        ["--stream", "a=bundle@replay:r.npz", "--json", "r.npz"],
+    ]
+    refused = [_cli(args, capsys)[0] for args in hostile]
+    for args in runs:
+        with pytest.raises(SystemExit) as exc:
+            run_main(args)
+        refused.append(int(exc.value.code or 0))
+    assert ([2] * (len(hostile) + len(runs)), before) == (refused, _snapshot(lab_tree))

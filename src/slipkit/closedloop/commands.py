@@ -326,9 +326,9 @@ def closedloop_main(cfg: DictConfig) -> Path:
         if cfg.get("out")
         else new_run_dir(Path(str(cfg.runs_dir)) / "closedloop", str(cfg.scenario))
     )
-    check_out_path(out, overwrite=bool(cfg.overwrite))
+    check_out_path(out, kind="closedloop", overwrite=bool(cfg.overwrite))
     start = time.perf_counter()
-    with atomic_dir(out, overwrite=bool(cfg.overwrite)) as tmp:
+    with atomic_dir(out, overwrite=bool(cfg.overwrite), kind="closedloop") as tmp:
         results, summary, timings = run_scenario(cfg, scen, tmp)
         timings["total_s"] = time.perf_counter() - start
         results.to_csv(tmp / "results.csv", index=False)

@@ -35,7 +35,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from slipkit._files import atomic_write_text, check_out_file
+from slipkit._files import check_out_file, read_json_object, write_out_file
 from slipkit.errors import SlipkitError
 from slipkit.runtime.bundle import (
     DEFAULT_DEADLINE_S,
@@ -44,7 +44,13 @@ from slipkit.runtime.bundle import (
     load_bundle,
 )
 from slipkit.runtime.errors import FrameError, OptionError
-from slipkit.runtime.hand import MAX_SPIN_US, MODES, check_spin_us, run_hand_cli
+from slipkit.runtime.hand import (
+    MAX_SPIN_US,
+    MODES,
+    check_spin_us,
+    parse_stream,
+    run_hand_cli,
+)
 from slipkit.runtime.loop import StreamLoop
 from slipkit.runtime.modules import heavy_modules_loaded
 from slipkit.runtime.realtime import (
@@ -65,6 +71,54 @@ from slipkit.runtime.sources import (
     load_replay,
 )
 from slipkit.runtime.tuning import MAX_ROUNDS, choose_session
+
+#: ``format`` of the summary ``--json`` writes: an existing file at ``--json`` is replaced
+#: only when it is such a summary (:func:`is_summary`)
+SUMMARY_FORMAT = "slipkit-run-summary"
+
+
+def is_summary(path: Path) -> bool:
+    """Whether ``path`` holds a summary ``--json`` wrote (and may write again).
+
+    One carrying ``"format": "slipkit-run-summary"``, or one written before the
+    marker: a single run's (``bundle`` with ``latency_ms`` and ``budget_ms``),
+    ``--choose-session``'s (``bundle`` with ``session_candidates``) or a hand's
+    (``hand`` with ``streams``).
+    """
+    obj = read_json_object(path)
+    if obj is None:
+        return False
+    if "format" in obj:
+        return obj["format"] == SUMMARY_FORMAT
+    return (
+        ("bundle" in obj and {"latency_ms", "budget_ms"} <= obj.keys())
+        or ("bundle" in obj and "session_candidates" in obj)
+        or ("hand" in obj and "streams" in obj)
+    )
+
+
+def _inputs(args: argparse.Namespace) -> dict[str, Path | str | None]:
+    """The files and folders this run reads, by option: ``--json`` is none of them."""
+    inputs: dict[str, Path | str | None] = {
+        "BUNDLE": args.bundle,
+        "--replay": args.replay,
+    }
+    for text in args.stream or []:
+        b = parse_stream(text)
+        inputs[f"--stream {b.name}"] = b.bundle
+        if b.kind == "replay":
+            inputs[f"--stream {b.name} replay"] = b.target
+    return inputs
+
+
+def _json_out(args: argparse.Namespace) -> dict[str, Any]:
+    """The keyword arguments of the ``--json`` checks (``slipkit._files``)."""
+    return {
+        "option": "--json",
+        "inputs": _inputs(args),
+        "is_own": is_summary,
+        "what": "a slipkit-run summary",
+    }
 
 
 class _Parser(argparse.ArgumentParser):
@@ -191,7 +245,8 @@ def _parser() -> argparse.ArgumentParser:
         "--json",
         type=Path,
         metavar="OUT",
-        help="write the summary as JSON (atomically)",
+        help="write the summary as JSON (atomically); an existing OUT is replaced only "
+        "when it is such a summary",
     )
     p.add_argument(
         "--io-binding",
@@ -420,8 +475,9 @@ def _check_args(args: argparse.Namespace) -> None:
     if args.send is not None and _address(args.send, "--send")[1] == 0:
         raise OptionError("--send", f"port must be in [1, 65535]; got {args.send!r}")
     if args.json is not None:
-        # Before any work: never over a dataset's, run's or bundle's own files.
-        check_out_file(args.json, option="--json")
+        # Before any work: never an input, a user's own file, a FIFO or device, nor
+        # a dataset's, run's or bundle's own files.
+        check_out_file(args.json, **_json_out(args))
 
 
 def _replay(bundle: Bundle, path: Path | None) -> tuple[Any, Any, str]:
@@ -693,11 +749,8 @@ def _finish(args: argparse.Namespace, out: dict[str, Any], status: int) -> int:
         out["heavy_modules_loaded"] = heavy
         print("heavy modules loaded: " + (", ".join(heavy) if heavy else "none"))
     if args.json is not None:
-        try:
-            atomic_write_text(args.json, json.dumps(out, indent=2) + "\n")
-        except (OSError, ValueError) as exc:  # ValueError: a NUL in the path
-            why = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
-            raise OptionError("--json", f"cannot write {args.json}: {why}") from None
+        text = json.dumps({"format": SUMMARY_FORMAT, **out}, indent=2) + "\n"
+        write_out_file(args.json, text, **_json_out(args))
     return status
 
 

@@ -22,7 +22,12 @@ objective, a validation score on the training side, so the best run is chosen wi
 looking at test data.
 
 The study lives in an Optuna storage: ``sqlite:///<out>/study.db`` by default, any
-RDB URL with ``storage=`` (``postgresql://user@host/db``). Every worker started with
+RDB URL with ``storage=`` (``postgresql://user@host/db``). Before anything is created,
+``out`` must be new, empty or a sweep's own folder (:data:`LAYOUT`: ``study.db``,
+``trials/``, ``best.json``), outside every dataset, run and bundle and outside the
+trials' data; an SQLite file must be new or an Optuna database, outside every dataset,
+run and bundle. An in-memory SQLite storage (``sqlite://``) is refused: the heartbeat
+thread and the other workers cannot reach it, and the study would end with the worker. Every worker started with
 the same ``study_name`` and storage joins the study (``load_if_exists``), on this
 machine or another; together they run ``n_trials`` complete trials. A worker that
 dies mid-trial stops its heartbeat; after ``grace_s`` the next worker marks that
@@ -43,6 +48,8 @@ import math
 import os
 import re
 import socket
+import sqlite3
+import stat
 import time
 import warnings
 from collections.abc import Iterator, Mapping, Sequence
@@ -53,7 +60,15 @@ from typing import Any
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
-from slipkit._files import atomic_write_text, check_plain_name
+from slipkit._files import (
+    Layout,
+    check_out_file,
+    check_out_path,
+    check_plain_name,
+    check_writable,
+    read_json_object,
+    write_out_file,
+)
 from slipkit.errors import SlipkitError
 
 log = logging.getLogger("slipkit.sweep")
@@ -67,6 +82,63 @@ SPACE_FIELDS: dict[str, tuple[frozenset[str], frozenset[str]]] = {
 #: the trial folders under ``out``; trial ``k`` trains into ``<out>/trials/<k:04d>``
 TRIALS_DIR = "trials"
 BEST_FILE = "best.json"
+#: the default storage, ``sqlite:///<out>/study.db``
+STUDY_FILE = "study.db"
+#: the first 16 bytes of every SQLite database file
+SQLITE_HEADER = b"SQLite format 3\x00"
+
+
+def sqlite_tables(path: Path | str) -> set[str] | None:
+    """The table names of the SQLite database file ``path`` (an empty file: none);
+    None when ``path`` is not a regular file holding an SQLite database.
+
+    Read through a read-only connection (``mode=ro``): the check writes nothing.
+    """
+    try:
+        st = os.stat(path)
+        if not stat.S_ISREG(st.st_mode):
+            return None
+        if st.st_size == 0:
+            return set()  # created by another worker a moment ago, not yet written
+        with open(path, "rb") as fh:
+            if fh.read(len(SQLITE_HEADER)) != SQLITE_HEADER:
+                return None
+        uri = f"{Path(path).resolve().as_uri()}?mode=ro"
+        con = sqlite3.connect(uri, uri=True, timeout=60)
+        try:
+            rows = con.execute(
+                "SELECT name FROM sqlite_master WHERE type = 'table'"
+            ).fetchall()
+        finally:
+            con.close()
+    except (OSError, sqlite3.Error):
+        return None
+    return {str(r[0]) for r in rows}
+
+
+def is_study_db(path: Path) -> bool:
+    """An SQLite file Optuna may write: an Optuna database (table ``studies``), or one
+    without tables yet (another worker is creating it)."""
+    tables = sqlite_tables(path)
+    return tables is not None and (not tables or "studies" in tables)
+
+
+def _is_best(path: Path) -> bool:
+    """A ``best.json`` a sweep wrote (``study_name``, ``trial`` and ``run_dir``)."""
+    obj = read_json_object(path)
+    return obj is not None and {"study_name", "trial", "run_dir"} <= obj.keys()
+
+
+#: What a sweep writes into ``out``, and nothing else: an existing ``out`` holding only
+#: these is a sweep's folder, which later workers join and a re-run resumes.
+LAYOUT = Layout(
+    "sweep",
+    frozenset(
+        {STUDY_FILE, *(STUDY_FILE + side for side in ("-journal", "-wal", "-shm"))}
+        | {TRIALS_DIR, BEST_FILE}
+    ),
+    marks={STUDY_FILE: is_study_db, TRIALS_DIR: Path.is_dir, BEST_FILE: _is_best},
+)
 #: the sweep's own options (configs/sweep.yaml); every other override goes to each trial
 SWEEP_KEYS = frozenset(
     {"search", "n_trials", "study_name", "out", "storage", "heartbeat_s", "grace_s"}
@@ -356,7 +428,72 @@ def storage_url(storage: Any, out: Path) -> str:
     """The study's storage: ``storage`` if given, else ``sqlite:///<out>/study.db``."""
     if storage:
         return str(storage)
-    return f"sqlite:///{(out / 'study.db').resolve()}"
+    return f"sqlite:///{(out / STUDY_FILE).resolve()}"
+
+
+def sqlite_path(url: str) -> Path | None:
+    """The database file of an SQLite ``url``; None for any other database.
+
+    Raises
+    ------
+    SlipkitError
+        ``storage=...``: an in-memory database (``sqlite://``, ``:memory:``,
+        ``mode=memory``): it lives only in this worker's connection, so Optuna's
+        heartbeat thread and the other workers cannot reach it and the study ends with
+        the worker; or a database opened read-only (``mode=ro``, ``immutable``).
+    """
+    if not url.startswith("sqlite"):
+        return None
+    from sqlalchemy.engine import make_url
+    from sqlalchemy.exc import ArgumentError
+
+    try:
+        parsed = make_url(url)
+    except ArgumentError:
+        return None  # open_storage names it
+    where = f"storage={url}"  # as given: an SQLite URL holds no password
+    query = {k: str(v).lower() for k, v in parsed.query.items()}
+    db = parsed.database or ""
+    if query.get("uri") in {"true", "1"} and db.startswith("file:"):
+        db = db[len("file:") :]
+    if db in {"", ":memory:"} or query.get("mode") == "memory":
+        raise SlipkitError(
+            f"{where}: an in-memory database lives only in this worker's connection "
+            "(the heartbeat thread and other workers cannot reach it, and the study "
+            "ends with the worker); give a file, sqlite:///<path>, or leave storage "
+            "unset for <out>/study.db"
+        )
+    if query.get("mode") == "ro" or query.get("immutable") in {"1", "true"}:
+        raise SlipkitError(
+            f"{where}: opened read-only; a sweep writes its trials into the study"
+        )
+    return Path(db)
+
+
+def check_storage(url: str, inputs: Mapping[str, Any]) -> Path | None:
+    """Refuse an SQLite storage whose file could destroy data; its path (None: no file).
+
+    The file follows the single-output-file rule (:func:`slipkit._files.check_out_file`:
+    not an input, a folder, a link or a device, not inside a dataset, run or bundle);
+    an existing file must be an Optuna database (:func:`is_study_db`) that this
+    account may write.
+    """
+    path = sqlite_path(url)
+    if path is None:
+        return None
+    check_out_file(
+        path,
+        option="storage",
+        inputs=inputs,
+        is_own=is_study_db,
+        what="an Optuna study database (SQLite)",
+    )
+    if path.exists() and not os.access(path, os.W_OK):
+        raise SlipkitError(
+            f"storage={path}: the database file is read-only; a sweep writes its "
+            "trials into it"
+        )
+    return path
 
 
 def shown_url(url: str) -> str:
@@ -579,7 +716,6 @@ def sweep_main(
     """
     import optuna
     from hydra.core.hydra_config import HydraConfig
-    from optuna.study import StudyDirection
     from optuna.trial import TrialState
 
     from slipkit._options import check_options
@@ -590,6 +726,17 @@ def sweep_main(
             list(HydraConfig.get().overrides.task) if HydraConfig.initialized() else []
         )
     check_options(cfg, "train")
+    out = Path(str(cfg.out))
+    url = storage_url(cfg.get("storage"), out)
+    given = bool(cfg.get("storage"))
+    # Checked first and before anything is created: the trials read their data, the
+    # sweep writes only its own folder and its own database.
+    inputs = {
+        "dataset.path": cfg.dataset.get("path"),
+        "dataset.raw": cfg.dataset.get("raw"),
+    }
+    check_out_path(out, inputs=inputs, layout=LAYOUT, overwrite=True)
+    db = check_storage(url, inputs) if given else None
     space = read_space(cfg.search.get("params"))
     fixed = train_overrides(overrides)
     base = compose_train(fixed)
@@ -608,27 +755,27 @@ def sweep_main(
             f"grace_s={cfg.grace_s}: must exceed heartbeat_s={cfg.heartbeat_s} (a live "
             "worker's trial would look dead between two heartbeats)"
         )
-    out = Path(str(cfg.out))
     name = check_plain_name(str(cfg.study_name), option="study_name")
-    url = storage_url(cfg.get("storage"), out)
-    if url.startswith("sqlite"):
-        out.mkdir(parents=True, exist_ok=True)
+    sqlite = url.startswith("sqlite")
+    if sqlite:  # the database file is made when the storage opens: out first
+        _make_out(out)
+        if not given:  # <out>/study.db: checked once out is known to be a folder
+            db = check_storage(url, inputs)
+        if db is not None and db.parent.resolve() != out.resolve():
+            check_writable(db.parent, option="storage")
     storage = open_storage(
         url,
         heartbeat_s=int(cfg.heartbeat_s),
         grace_s=int(cfg.grace_s),
         max_retry=int(cfg.max_retry),
     )
+    if not sqlite:  # a server database: out once the storage is known to open
+        _make_out(out)
     # ERROR: a trial that fails raises through to the CLI's one line anyway.
     optuna.logging.set_verbosity(optuna.logging.ERROR)
-    study = optuna.create_study(
-        storage=storage,
-        study_name=name,
-        direction=StudyDirection[obj.direction.upper()],
-        sampler=_sampler_class()(int(base.seed)),
-        load_if_exists=True,
+    study = _joined_study(
+        storage, name, url, obj, int(base.seed), _study_identity(fixed, space, obj)
     )
-    _check_joins(study, _study_identity(fixed, space, obj), name, url)
     host = socket.gethostname()
     print(f"study {name} ({shown_url(url)}): worker {host}:{os.getpid()} joined")
 
@@ -717,23 +864,80 @@ def sweep_main(
             t.state == TrialState.COMPLETE for t in study.get_trials(deepcopy=False)
         ),
     }
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / BEST_FILE, json.dumps(record, indent=2) + "\n")
+    write_out_file(
+        out / BEST_FILE,
+        json.dumps(record, indent=2) + "\n",
+        option="out",
+        is_own=_is_best,
+        what="a sweep's best.json",
+    )
     print(out / BEST_FILE)
     return record
 
 
+def _make_out(out: Path) -> None:
+    """Create ``out`` (checked by :data:`LAYOUT` already) and check it can be written."""
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise SlipkitError(
+            f"out={out}: cannot create it: {exc.strerror or exc}"
+        ) from None
+    check_writable(out, option="out")
+
+
+def _joined_study(
+    storage: Any,
+    name: str,
+    url: str,
+    obj: Objective,
+    seed: int,
+    identity: Mapping[str, Any],
+) -> Any:
+    """``optuna.create_study(load_if_exists=True)`` and :func:`_check_joins`; a database
+    that refuses the write (read-only, locked) is a :class:`SlipkitError` naming
+    ``storage``."""
+    import optuna
+    from optuna.study import StudyDirection
+    from sqlalchemy.exc import OperationalError
+
+    try:
+        study = optuna.create_study(
+            storage=storage,
+            study_name=name,
+            direction=StudyDirection[obj.direction.upper()],
+            sampler=_sampler_class()(seed),
+            load_if_exists=True,
+        )
+        _check_joins(study, identity, name, url)
+        return study
+    except (OperationalError, optuna.exceptions.StorageInternalError) as exc:
+        # Optuna wraps a failed commit; the database's own reason is its cause
+        cause = exc.__cause__ or exc
+        cause = getattr(cause, "orig", None) or cause
+        first = (str(cause) or type(cause).__name__).splitlines()[0]
+        raise SlipkitError(
+            f"storage={shown_url(url)}: cannot write the study: {first}"
+        ) from None
+
+
 __all__ = [
     "BEST_FILE",
+    "LAYOUT",
     "SPACE_FIELDS",
+    "STUDY_FILE",
     "SWEEP_KEYS",
     "TRIALS_DIR",
     "Objective",
     "best_lines",
+    "check_storage",
     "compose_train",
+    "is_study_db",
     "open_storage",
     "override",
     "read_space",
+    "sqlite_path",
+    "sqlite_tables",
     "storage_url",
     "suggest",
     "sweep_main",

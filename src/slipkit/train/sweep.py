@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import json
 import logging
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -42,7 +43,8 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, ListConfig
 
-from slipkit._files import atomic_write_text
+from slipkit._files import first_line, read_json_object, write_out_file
+from slipkit.errors import SlipkitError
 
 log = logging.getLogger("slipkit.sweep")
 
@@ -54,6 +56,36 @@ REPLICATES = ("seed", "dataset.seed")
 METRIC_SECTIONS = ("validation", "test")
 #: Leaves that count things rather than score them (sample sizes, CV folds).
 _BOOKKEEPING = frozenset({"n", "k", "debounce_k", "n_trials"})
+
+
+def _has(*keys: str) -> Any:
+    """A recogniser: a JSON object holding every one of ``keys``."""
+
+    def test(path: Path) -> bool:
+        obj = read_json_object(path)
+        return obj is not None and set(keys) <= obj.keys()
+
+    return test
+
+
+#: file name -> (recogniser of what the multirun wrote there, what it is called): the
+#: sweep folder may be a folder of the user's (``hydra.sweep.dir=...``), and a file of
+#: the same name is replaced only when it is the multirun's own
+OWN_FILES = {
+    JOB_FILE: (_has("job", "run_dir", "overrides", "objective"), "a multirun job.json"),
+    "sweep.json": (_has("objective", "jobs"), "a multirun sweep.json"),
+    "best.json": (_has("job", "run_dir", "objective"), "a multirun best.json"),
+    AGGREGATE_FILE: (
+        lambda path: first_line(path).startswith("estimator,"),
+        "a multirun aggregate.csv",
+    ),
+}
+
+
+def _write(path: Path, text: str) -> None:
+    """Write one of :data:`OWN_FILES` (never over a file the multirun did not write)."""
+    is_own, what = OWN_FILES[path.name]
+    write_out_file(path, text, option="hydra.sweep.dir", is_own=is_own, what=what)
 
 
 def record_job(run_dir: Path, objective: dict[str, Any]) -> Path | None:
@@ -75,7 +107,7 @@ def record_job(run_dir: Path, objective: dict[str, Any]) -> Path | None:
         "objective": objective,
     }
     path = folder / JOB_FILE
-    atomic_write_text(path, json.dumps(payload, indent=2) + "\n")
+    _write(path, json.dumps(payload, indent=2) + "\n")
     return path
 
 
@@ -122,11 +154,11 @@ def summarise_sweep(sweep_dir: Path) -> dict[str, Any] | None:
     for job in jobs:
         job["swept"] = _sweep_params(job["overrides"], swept)
     best = jobs[0]
-    atomic_write_text(
+    _write(
         sweep_dir / "sweep.json",
         json.dumps({"objective": best["objective"], "jobs": jobs}, indent=2) + "\n",
     )
-    atomic_write_text(sweep_dir / "best.json", json.dumps(best, indent=2) + "\n")
+    _write(sweep_dir / "best.json", json.dumps(best, indent=2) + "\n")
     return best
 
 
@@ -227,7 +259,7 @@ def aggregate_sweep(
     metric_cols = [c for c in df.columns if c not in by]
     df[metric_cols] = df[metric_cols].apply(pd.to_numeric, errors="coerce")
     table = aggregate(df, by=by, metrics=metric_cols)
-    atomic_write_text(sweep_dir / AGGREGATE_FILE, table.to_csv(index=False))
+    _write(sweep_dir / AGGREGATE_FILE, table.to_csv(index=False))
     return table
 
 
@@ -275,6 +307,13 @@ class SweepSummary(Callback):
         sweep_dir = Path(str(config.hydra.sweep.dir))
         if not sweep_dir.is_dir():
             return
+        try:
+            self._summarise(sweep_dir)
+        except SlipkitError as exc:
+            # Hydra turns a callback's exception into a warning: say it in one line.
+            print(f"slipkit: error: {exc}; sweep summary not written", file=sys.stderr)
+
+    def _summarise(self, sweep_dir: Path) -> None:
         best = summarise_sweep(sweep_dir)
         if best is None:
             return
@@ -292,6 +331,7 @@ class SweepSummary(Callback):
 __all__ = [
     "AGGREGATE_FILE",
     "JOB_FILE",
+    "OWN_FILES",
     "REPLICATES",
     "SweepSummary",
     "aggregate_lines",
