@@ -635,6 +635,33 @@ def _give_umask(root: Path) -> None:
 
 
 # -- writes -------------------------------------------------------------------------------
+#: the temporary folder of every :func:`atomic_dir` block still running -> its target
+#: (absolute paths), so that what is written inside can name its final location
+_PENDING: dict[str, str] = {}
+
+
+def final_path(path: Path | str) -> Path:
+    """``path`` as it will be named once the :func:`atomic_dir` blocks around it finish.
+
+    A run trained inside another command's output (``slipkit compare`` writes its runs
+    into its own temporary folder) would otherwise record the temporary name, which is
+    gone after the rename. Outside any such block ``path`` is returned unchanged.
+    """
+    here = os.path.abspath(path)
+    moved = False
+    for _ in range(len(_PENDING)):  # nested blocks: a target may lie in an outer temp
+        inside = [
+            (tmp, target)
+            for tmp, target in list(_PENDING.items())
+            if here == tmp or here.startswith(tmp + os.sep)
+        ]
+        if not inside:
+            break
+        tmp, target = inside[0]
+        here, moved = target + here[len(tmp) :], True
+    return Path(here) if moved else Path(path)
+
+
 def _swap(tmp: Path, target: Path) -> None:
     """Replace ``target`` by ``tmp`` with two renames; on any failure put the old one back."""
     old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old-", dir=target.parent))
@@ -698,6 +725,7 @@ def atomic_dir(
     created = [p for p in (target.parent, *target.parent.parents) if not p.exists()]
     target.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
+    _PENDING[os.path.abspath(tmp)] = os.path.abspath(target)
     try:
         yield tmp
         _give_umask(tmp)
@@ -715,6 +743,8 @@ def atomic_dir(
             with contextlib.suppress(OSError):
                 parent.rmdir()
         raise
+    finally:
+        _PENDING.pop(os.path.abspath(tmp), None)
 
 
 def atomic_write_text(path: Path | str, text: str) -> None:

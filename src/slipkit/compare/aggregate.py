@@ -107,7 +107,9 @@ def aggregate(
         parts[f"{c}_mean"] = mean[c]
         parts[f"{c}_std"] = std[c]
         parts[f"{c}_ci"] = ci[c]
-    return pd.concat(parts, axis=1).reset_index()
+    # One frame built at once (one block per dtype): concatenating the Series gives a
+    # block per column, and reset_index's insert into it warns of fragmentation.
+    return pd.DataFrame(parts).reset_index()
 
 
 __all__ = ["aggregate"]

@@ -297,9 +297,8 @@ def export_main(cfg: DictConfig) -> Path:
     import onnxruntime
 
     metrics = run.info.get("objective", {})
-    from slipkit.export.deploy import run_metrics
-
-    m = run_metrics(run)
+    # read_run checked these bytes against run.json (and the objective against them)
+    m = run.metrics
     manifest: dict[str, Any] = {
         "name": name,
         "description": (

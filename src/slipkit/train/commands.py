@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import datetime as dt
 import logging
+import math
 import random
 import sys
 import time
@@ -32,6 +33,7 @@ from slipkit.train.data import training_dataset
 from slipkit.train.runs import (
     RUN_FORMAT,
     RUN_SCHEMA_VERSION,
+    file_checksums,
     new_run_dir,
     read_run,
     save_model,
@@ -140,6 +142,8 @@ def train_main(cfg: DictConfig) -> float:
                     "model": str(estimator_node(cfg)._target_),
                     "model_file": "model.joblib",
                     "model_sha256": model_sha,
+                    # every file a later command reads (config, metrics, tables, model)
+                    "files": file_checksums(tmp),
                     "objective": {
                         "name": task.objective,
                         "direction": task.direction,
@@ -325,9 +329,10 @@ def check_fits_run(run: Any, dataset: Any, where: Path) -> None:
 
     A fitted estimator reads the channels it was trained on: a TacTip with another
     pin count, or another sensor, would reach the model as the wrong number of
-    features. Compared with ``run.json`` (``dataset.sensor`` and, for runs written
-    since it is recorded, ``dataset.streams``): the sensor, the presence of every
-    stream the run's task names, and the channels of the stream(s) it reads.
+    features, and a stream at another sample rate as windows of another length.
+    Compared with ``run.json`` (``dataset.sensor`` and ``dataset.streams``): the
+    sensor, the presence of every stream the run's task names, and the sample rate
+    and channels of the stream(s) it reads.
 
     Raises
     ------
@@ -361,6 +366,20 @@ def check_fits_run(run: Any, dataset: Any, where: Path) -> None:
             )
         if key not in INPUT_STREAM_KEYS or name not in streams:
             continue
+        trained_hz, have_hz = (
+            streams[name].get("rate_hz"),
+            dataset.streams[name].rate_hz,
+        )
+        if (
+            trained_hz is not None
+            and have_hz is not None
+            # relative tolerance: a rate computed from timestamps carries float noise
+            and not math.isclose(float(trained_hz), float(have_hz), rel_tol=1e-6)
+        ):
+            raise SlipkitError(
+                f"{what}: stream {name!r} is sampled at {float(have_hz):g} Hz, the run "
+                f"was {origin} at {float(trained_hz):g} Hz"
+            )
         want = [str(c) for c in streams[name].get("channels") or []]
         have = list(dataset.streams[name].channels)
         chosen = task_cfg.get("channels") if key == "stream" else None
@@ -430,6 +449,8 @@ def evaluate_main(cfg: DictConfig) -> Path:
             **jsonable(metrics),
         }
         write_json(tmp / "metrics.json", payload)
+    for line in task.headline(metrics):  # a detector's operating point first
+        print(line)
     overlap = _overlap_line(payload["dataset"])
     if overlap:
         print(overlap)

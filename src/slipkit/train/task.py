@@ -79,6 +79,11 @@ class Task(ABC):
     def evaluate(self, model: Any, dataset: Dataset, *, out: Path) -> dict[str, Any]:
         """Score the fitted ``model`` on all of ``dataset`` (data it never saw)."""
 
+    def headline(self, metrics: Mapping[str, Any]) -> list[str]:
+        """Lines ``slipkit evaluate`` prints first: what the deployed estimator does
+        (a detector's operating point); none by default."""
+        return []
+
     def objective_value(
         self, metrics: Mapping[str, Any], name: str | None = None
     ) -> float:

@@ -22,6 +22,12 @@ labels ``y``: a truth-stream column (``truth_column``, e.g. the FSR scene's
 * **latency** -- first detection at or after the onset, in ms, per trial; with
   ``reference_label`` (the BioTac scene's IMU onset) the lead (-) or lag (+) against it,
   mean +- sd overall and per group (``group_by``), beside the paper's figures.
+* **operating point** -- what the deployed detector does at its threshold (a bundle
+  decides ``score >= threshold`` with debounce 1 unless ``slipkit export debounce_k=``
+  says otherwise): slips detected (trials), alarms before the onset (trials), false
+  alarms per minute of non-slip data (fired non-slip event units, as ``slipkit
+  compare`` counts them) and the median delay. ``slipkit train`` and ``slipkit
+  evaluate`` print it first.
 
 ``compare`` adds detectors scored the same way beside the run's estimator, each on its
 own stream (the BioTac pressure detector reads ``pac`` at 2.2 kHz, the force derivative
@@ -479,6 +485,16 @@ class StreamDetection(Task):
             ),
         }
         out["latency_ms"] = _mean_sd(trials["latency_ms"].tolist())
+        minutes = samples["n_neg"] / rec.rate_hz / 60.0
+        out["operating_point"] = {
+            "debounce_k": 1,
+            "slips_detected": out["trials"]["tp"],
+            "n_slips": out["trials"]["n_slip"],
+            "alarms_before_onset": out["trials"]["fp"],
+            "n_trials": out["trials"]["n"],
+            "false_alarms_per_min": events["fp"] / minutes if minutes else math.nan,
+            "median_delay_ms": out["latency_ms"]["median"],
+        }
         if rec.reference_s is not None and np.isfinite(rec.reference_s).any():
             ref: dict[str, Any] = {"all": _mean_sd(trials["vs_reference_ms"].tolist())}
             if self.group_by:
@@ -673,7 +689,12 @@ class StreamDetection(Task):
                     rec.X, rec.y, segments=rec.segments
                 )  # fixed: records the ROC only
             m, table, cv = self.score(det, rec)
-            block = {"estimator": type(det).__name__, "test": m, "paper": e["paper"]}
+            block = {
+                "estimator": type(det).__name__,
+                "unit": e["unit"],
+                "test": m,
+                "paper": e["paper"],
+            }
             if i == 0:
                 metrics.update({"name": e["name"], **block})
             else:
@@ -685,9 +706,17 @@ class StreamDetection(Task):
         return metrics
 
     # -- report ------------------------------------------------------------------------------
+    def headline(self, metrics: Mapping[str, Any]) -> list[str]:
+        """The main detector's operating point on the test side (printed first)."""
+        test = metrics.get("test") or {}
+        if "operating_point" not in test:
+            return []
+        return [operating_point_line(metrics["name"], test, metrics.get("unit", ""))]
+
     def summary(self, metrics: Mapping[str, Any]) -> list[str]:
-        """Lines printed after training: each detector beside the paper's figures."""
-        lines = []
+        """Lines printed after training: the operating point on the test trials, then
+        each detector beside the paper's figures."""
+        lines = self.headline(metrics)
         blocks = [(metrics["name"], metrics), *metrics["detectors"].items()]
         for name, b in blocks:
             lines.extend(_summary_block(name, b, self.group_by))
@@ -710,6 +739,23 @@ def _pct(v: Any) -> str:
 
 def _num(v: Any, fmt: str = ".4g") -> str:
     return "n/a" if v is None or not math.isfinite(float(v)) else format(float(v), fmt)
+
+
+def operating_point_line(name: str, test: Mapping[str, Any], unit: str = "") -> str:
+    """One line: ``<name> at threshold <t> <unit>, debounce 1: slips detected 36/40
+    (90 %), alarms before onset 3/40 trials, false alarms 0.8 /min, median delay 42 ms``."""
+    op = test["operating_point"]
+    n_slips, n = int(op["n_slips"]), int(op["n_trials"])
+    share = (
+        f" ({_num(100.0 * op['slips_detected'] / n_slips, '.0f')} %)" if n_slips else ""
+    )
+    return (
+        f"{name} at threshold {_num(test.get('threshold'))}{' ' + unit if unit else ''}"
+        f", debounce {int(op['debounce_k'])}: slips detected {int(op['slips_detected'])}"
+        f"/{n_slips}{share}, alarms before onset {int(op['alarms_before_onset'])}/{n} "
+        f"trials, false alarms {_num(op['false_alarms_per_min'], '.3g')} /min, median "
+        f"delay {_num(op['median_delay_ms'], '.0f')} ms"
+    )
 
 
 def _summary_block(name: str, b: Mapping[str, Any], group_by: str | None) -> list[str]:
@@ -779,4 +825,4 @@ def _plot_roc(curves: Mapping[str, Mapping[str, Any]], path: Path) -> None:
     plt.close(fig)
 
 
-__all__ = ["Recordings", "StreamDetection"]
+__all__ = ["Recordings", "StreamDetection", "operating_point_line"]
