@@ -30,6 +30,7 @@ from slipkit.export.detectors import (
 from slipkit.export.registry import ExportError
 from slipkit.runtime.errors import BundleError
 from slipkit.runtime.preprocessing import Pipeline
+from slipkit.runtime.sources import ReplaySource
 
 FORMS = {"paper": {}, "robust": ROBUST}
 
@@ -451,3 +452,49 @@ def test_alpha_on_a_training_score_moves_halfway_to_the_next_lower(
     det.set_params(threshold=given).fit(exact, np.zeros(len(exact), int))
     expected = 0.5 * (top + below) if on_score else given
     assert expected == det.threshold_
+
+
+def _stream_with_gaps(
+    trials: list[Any], rate_hz: float, gap_periods: float = 10.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """The trials end to end as one stream (frames, timestamps), ``gap_periods``
+    frame periods between one trial's last frame and the next's first."""
+    frames, times, start = [], [], 0.0
+    for tr in trials:
+        t = start + np.arange(len(tr.v)) / rate_hz
+        frames.append(tr.v[:, None])
+        times.append(t)
+        start = float(t[-1]) + gap_periods / rate_hz
+    return np.concatenate(frames), np.concatenate(times)
+
+
+def test_mixed_wiring_bundle_decides_as_the_detector_over_one_stream_with_gaps(
+    tmp_path: Path,
+) -> None:
+    """A per-recording (mixed-wiring) bundle fed four trials of alternating wiring as
+    one stream, a gap between trials: each gap starts a new recording (press_sign
+    reset, window and hop grid restarted), so the loop decides on exactly the
+    detector's instants of each trial, with the detector's decisions."""
+    from slipkit.runtime import StreamLoop, load_bundle
+
+    det = _mixed_detector("paper", 8.0)
+    graph = export_fsr_touch_slip(det)
+    trials = []
+    for seed in (200, 201):
+        trials += fsr_trials(seed, 1, polarity="falling", slide=True)
+        trials += fsr_trials(seed, 1, polarity="rising", slide=True)
+    rate = 2000.0
+    x, t = _stream_with_gaps(trials, rate)
+    loop = StreamLoop(load_bundle(_bundle(graph, tmp_path / "fsr")), capacity=4096)
+    res = loop.run(ReplaySource(x, t))
+    starts = np.r_[0, np.cumsum([len(tr.v) for tr in trials])]
+    expected_frames, expected_slip = [], []
+    for k, tr in enumerate(trials):
+        inst = np.arange(graph.window - 1, len(tr.v), graph.hop)  # each trial's grid
+        ref = det.decision_function(tr.v[:, None])[inst]
+        expected_frames += (starts[k] + inst).tolist()
+        expected_slip += (ref >= det.threshold_).tolist()
+    assert 3 == res.gaps
+    assert expected_frames == res.frame.tolist()
+    assert expected_slip == res.slip.tolist()
+    assert 0 < sum(expected_slip)  # the slides fire: not vacuous
