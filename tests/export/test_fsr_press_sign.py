@@ -174,36 +174,48 @@ def _compose(name: str, overrides: list[str]) -> DictConfig:
         return compose(config_name=name, overrides=overrides)
 
 
+@pytest.fixture(scope="module")
+def hard_fsr(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """(run, bundle) of fsr_robust trained on 6 trials of the hard scene (mixed
+    wirings), exported without session choice."""
+    from slipkit.export.commands import export_main
+    from slipkit.train.commands import train_main
+
+    tmp = tmp_path_factory.mktemp("hard_fsr")
+    run_dir, out = tmp / "run", tmp / "bundle"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", PolarityWarning)
+        train_main(
+            _compose(
+                "train",
+                [
+                    "experiment=fsr_robust",
+                    "scene=fsr_probe_slide_hard",
+                    "dataset.n_trials=6",
+                    f"run_dir={run_dir}",
+                ],
+            )
+        )
+        export_main(
+            _compose("export", [f"run={run_dir}", f"out={out}", "choose_session=false"])
+        )
+    return run_dir, out
+
+
 @pytest.mark.filterwarnings("ignore::slipkit.baselines.fsr.PolarityWarning")
 def test_fsr_robust_bundle_on_the_hard_scene_decides_as_the_detector_per_stream(
-    tmp_path: Path,
+    hard_fsr: tuple[Path, Path],
 ) -> None:
     """Trained on the hard scene's mixed wirings, exported, replayed per held-out trial
     through StreamLoop (reset between streams): decisions equal the batch detector's."""
-    from slipkit.export.commands import export_main
     from slipkit.export.deploy import trial_frames
     from slipkit.runtime import StreamLoop, load_bundle
-    from slipkit.train.commands import train_main
     from slipkit.train.data import training_dataset
     from slipkit.train.runs import read_run
 
-    run_dir, out = tmp_path / "run", tmp_path / "bundle"
-    train_main(
-        _compose(
-            "train",
-            [
-                "experiment=fsr_robust",
-                "scene=fsr_probe_slide_hard",
-                "dataset.n_trials=6",
-                f"run_dir={run_dir}",
-            ],
-        )
-    )
+    run_dir, out = hard_fsr
     run = read_run(run_dir)
     assert "per_recording" == run.model.polarity_
-    export_main(
-        _compose("export", [f"run={run_dir}", f"out={out}", "choose_session=false"])
-    )
     raw = json.loads((out / "manifest.json").read_text())
     assert ["press_sign"] == [s["op"] for s in raw["preprocessing"]]
     loop = StreamLoop(load_bundle(out))
@@ -224,6 +236,50 @@ def test_fsr_robust_bundle_on_the_hard_scene_decides_as_the_detector_per_stream(
         assert (ref >= thr).tolist() == res.slip.tolist()
         n_slip += int(res.slip.sum())
     assert n_slip > 0
+
+
+@pytest.mark.filterwarnings("ignore::slipkit.baselines.fsr.PolarityWarning")
+def test_fsr_hard_scene_export_checks_the_loop_over_a_stream_and_replays_each_wiring(
+    hard_fsr: tuple[Path, Path],
+) -> None:
+    """The export ran the loop over every held-out trial as one stream with gaps
+    (stream parity passed); the replay holds trials of both wirings a gap apart, and
+    the bundle's loop over it decides as the detector on each trial."""
+    from slipkit.export.deploy import trial_frames
+    from slipkit.runtime import StreamLoop, load_bundle
+    from slipkit.runtime.sources import load_replay
+    from slipkit.train.data import training_dataset
+    from slipkit.train.runs import read_run
+
+    run_dir, out = hard_fsr
+    raw = json.loads((out / "manifest.json").read_text())
+    stream = raw["training"]["stream_parity"]
+    assert (True, True, 0) == (
+        stream["passed"],
+        stream["calls_match"],
+        stream["n_disagree"],
+    )
+    run = read_run(run_dir)
+    data = training_dataset(run.config)
+    test_ids = json.loads((run_dir / "metrics.json").read_text())["split"]["test"]
+    held = trial_frames(data, test_ids, "fsr", ["voltage"])
+    assert len(held) == stream["recordings"]
+    bundle = load_bundle(out)
+    frames, times = load_replay(out / "replay.npz", (1,), 2000.0)
+    cuts = np.flatnonzero(np.diff(times) > 1.5 / bundle.manifest.frame.rate_hz) + 1
+    parts = np.split(np.arange(len(frames)), cuts)
+    assert raw["training"]["replay"]["trials"] == len(parts)
+    wiring = data.trials.set_index("trial_id")["fsr_polarity.polarity"]
+    seen = set()
+    res = StreamLoop(bundle).run(ReplaySource(frames, times))
+    thr = float(bundle.manifest.decision.threshold or 0.0)
+    for idx in parts:
+        (tr,) = [t for t in held if np.array_equal(t.frames, frames[idx])]
+        seen.add(wiring.loc[tr.trial_id])
+        mine = (res.frame >= idx[0]) & (res.frame <= idx[-1])
+        ref = run.model.decision_function(tr.frames)[res.frame[mine] - idx[0]]
+        assert (ref >= thr).tolist() == res.slip[mine].tolist()
+    assert {"falling", "rising"} == seen
 
 
 # -- a fixed polarity: the rest level from the stream, the sign from fit ---------------------
