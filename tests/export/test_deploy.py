@@ -313,3 +313,24 @@ def test_replay_holds_a_trial_of_every_class_and_wiring_past_the_frame_cap() -> 
     assert ["t0", "t1", "t3", "t4"] == [t.trial_id for t in dep.replay_trials(200)]
     dep.max_replay_frames = 500
     assert ["t0", "t1", "t3"] == [t.trial_id for t in dep.replay_trials(200)]
+
+
+def test_failed_stream_parity_writes_no_bundle(
+    runs: dict[str, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A baseline_first bundle whose loop over the held-out stream disagrees: one
+    SlipkitError naming the stream parity, and no bundle folder."""
+    import slipkit.export.parity as parity
+
+    real = parity.stream_parity
+
+    def disagreeing(*args: Any, **kwargs: Any) -> dict[str, Any]:
+        report = real(*args, **kwargs)
+        assert report["passed"]  # the real check passes: only its verdict is changed
+        return {**report, "agreement": 0.977, "n_disagree": 214, "passed": False}
+
+    monkeypatch.setattr(parity, "stream_parity", disagreeing)
+    out = tmp_path / "force"
+    with pytest.raises(SlipkitError, match=r"stream parity failed .* 97\.700 %"):
+        export_main(_export_cfg(runs["force_normals"], out))
+    assert not out.exists()
