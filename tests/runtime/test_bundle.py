@@ -251,7 +251,9 @@ json_values = st.recursive(
     field=st.sampled_from(["rate_hz", "window", "hop", "shape", "channels"]),
     value=json_values,
 )
-@example(field="shape", value=[993, 1056])  # too large for the window: named as the shape
+@example(
+    field="shape", value=[993, 1056]
+)  # too large for the window: named as the shape
 def test_any_json_value_is_accepted_or_named(field: str, value: Any) -> None:
     """Whatever JSON sits in a frame field, validation accepts it or names that field."""
     man = manifest(12)
@@ -415,3 +417,56 @@ def test_edited_slip_classes_break_the_digest(tmp_path: Path) -> None:
     with pytest.raises(BundleError) as info:
         load_bundle(bundle)
     assert "manifest_sha256" == info.value.field
+
+
+@pytest.mark.parametrize("opset", [16, 18])
+def test_manifest_opset_other_than_the_graphs_is_refused_naming_both(
+    case: LinearCase, opset: int
+) -> None:
+    """A re-signed manifest whose opset is not model.onnx's default-domain opset_import
+    (17) is refused naming the field and both opsets."""
+    case.edit_manifest(_set("opset", opset))
+    with pytest.raises(BundleError) as info:
+        load_bundle(case.path)
+    assert "opset" == info.value.field
+    assert f"is {opset} but model.onnx imports default-domain opset 17" in str(
+        info.value
+    )
+
+
+def test_graph_opsets_are_read_as_onnx_reads_them() -> None:
+    """onnx_opsets (a hand-written protobuf reader) gives onnx's own opset_import, the
+    default domain as '' (also when spelled ai.onnx), the highest of a repeated one."""
+    import onnx
+
+    from slipkit.runtime.bundle import onnx_opsets
+
+    model = onnx.load_from_string(linear_graph(np.ones(3), 0.0, opset=18))
+    model.doc_string = "x" * 300  # a long length-delimited field before the opsets
+    model.opset_import.extend(
+        [
+            onnx.helper.make_opsetid("ai.onnx.ml", 3),
+            onnx.helper.make_opsetid("ai.onnx", 16),
+        ]
+    )
+    assert {"": 18, "ai.onnx.ml": 3} == onnx_opsets(model.SerializeToString())
+    with pytest.raises(ValueError, match="past the end"):
+        onnx_opsets(model.SerializeToString()[:-3])
+
+
+@pytest.mark.parametrize("dtype", ["<U8", "S8", "bool"])
+def test_replay_timestamps_that_are_not_numbers_are_refused_naming_the_array(
+    tmp_path: Path, dtype: str
+) -> None:
+    """Timestamps stored as strings (or booleans) are refused naming 'timestamps',
+    not converted."""
+    from slipkit.runtime.sources import load_replay
+
+    path = tmp_path / "r.npz"
+    np.savez(
+        path,
+        frames=np.zeros((3, 3)),
+        timestamps=np.array([0.0, 0.01, 0.02]).astype(dtype),
+    )
+    with pytest.raises(FrameError, match=r"'timestamps' must be numbers \(s\); got"):
+        load_replay(path, (3,), 100.0)

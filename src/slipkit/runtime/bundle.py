@@ -965,6 +965,101 @@ def run_with_deadline(
         timer.cancel()
 
 
+def _varint(data: bytes, pos: int) -> tuple[int, int]:
+    """A protobuf varint at ``pos``: (value, position after it)."""
+    value = shift = 0
+    while True:
+        if pos >= len(data) or shift > 63:
+            raise ValueError("a varint runs past the end")
+        byte = data[pos]
+        pos += 1
+        value |= (byte & 0x7F) << shift
+        shift += 7
+        if byte < 0x80:
+            return value, pos
+
+
+def _proto_fields(data: bytes) -> list[tuple[int, int | bytes]]:
+    """The top-level fields of a protobuf message: (field number, varint or bytes).
+
+    Fixed-width fields are skipped; groups (wire types 3, 4) are refused.
+    """
+    out: list[tuple[int, int | bytes]] = []
+    pos = 0
+    while pos < len(data):
+        key, pos = _varint(data, pos)
+        number, wire = key >> 3, key & 7
+        if wire == 0:
+            value, pos = _varint(data, pos)
+            out.append((number, value))
+        elif wire == 2:
+            size, pos = _varint(data, pos)
+            if pos + size > len(data):
+                raise ValueError("a field runs past the end")
+            out.append((number, data[pos : pos + size]))
+            pos += size
+        elif wire in (1, 5):
+            pos += 8 if wire == 1 else 4
+        else:
+            raise ValueError(f"wire type {wire} is not read here")
+    return out
+
+
+def onnx_opsets(model: bytes) -> dict[str, int]:
+    """A serialised ONNX model's ``opset_import``: domain -> version (the highest
+    when a domain is listed twice; the default domain is ``""``, ``ai.onnx`` too).
+
+    Read from the protobuf wire format by hand: the gripper PC has no ``onnx``
+    package and onnxruntime does not expose a model's opsets. ``ModelProto`` field
+    8 is ``opset_import``; ``OperatorSetIdProto`` holds ``domain`` (1) and
+    ``version`` (2).
+
+    Raises
+    ------
+    ValueError
+        The bytes are not a well-formed protobuf message.
+    """
+    opsets: dict[str, int] = {}
+    for number, value in _proto_fields(model):
+        if number != 8 or not isinstance(value, bytes):
+            continue
+        domain, version = "", 0
+        for sub, item in _proto_fields(value):
+            if sub == 1 and isinstance(item, bytes):
+                domain = item.decode("utf-8", "replace")
+            elif sub == 2 and isinstance(item, int):
+                version = item
+        domain = "" if domain == "ai.onnx" else domain
+        opsets[domain] = max(opsets.get(domain, 0), version)
+    return opsets
+
+
+def _check_opset(
+    manifest: Manifest, model: bytes, model_file: str, manifest_file: str
+) -> None:
+    """The manifest's ``opset`` is the graph's default-domain ``opset_import``."""
+    top = Fields(manifest_file, manifest.raw)
+    try:
+        graph = onnx_opsets(model).get("")
+    except ValueError as exc:
+        raise BundleError(
+            model_file,
+            None,
+            f"its opset_import cannot be read: {exc}",
+        ) from None
+    if graph != manifest.opset:
+        raise top.error(
+            "opset",
+            f"is {manifest.opset} but {MODEL_FILE} imports "
+            + (
+                "no default-domain opset"
+                if graph is None
+                else f"default-domain opset {graph}"
+            )
+            + " (opset_import); re-export the bundle",
+        )
+
+
 def _check_graph(
     manifest: Manifest,
     session: ort.InferenceSession,
@@ -1292,6 +1387,7 @@ def load_bundle(
     spec = manifest.session if session is None else session
     model_file = str(root / MODEL_FILE)
     sess = _session(model, spec, model_file)
+    _check_opset(manifest, model, model_file, mfile)
     _check_graph(manifest, sess, model_file, mfile)
     window_shape = (manifest.frame.window, *manifest.frame.shape)
     pipeline = Pipeline(manifest.preprocessing, window_shape, mfile)
@@ -1364,6 +1460,7 @@ def _check_prepare(
             f"{list(want.shape)} (the loop feeds both graphs the same window)",
         )
     tensor = manifest.prepare
+    assert tensor is not None  # only called for a bundle with a prepare graph
     outs = {o.name: o for o in prep.get_outputs()}
     if tensor not in outs:
         raise BundleError(

@@ -143,7 +143,8 @@ def check_replay_arrays(
     """Check recorded frames and timestamps against a frame shape.
 
     Returns ``frames`` as ``(n, *frame_shape)`` (float32 kept, other numbers as
-    float64) and ``timestamps`` as float64; :class:`FrameError` names the array.
+    float64) and ``timestamps`` as float64 (integer or float arrays only: strings
+    and booleans are refused, not converted); :class:`FrameError` names the array.
     """
     if frames.dtype.kind not in "fiu" or frames.ndim < 2 or len(frames) == 0:
         raise FrameError(
@@ -160,6 +161,12 @@ def check_replay_arrays(
         frames = frames.reshape(n, *frame_shape)
     if frames.dtype != np.float32:
         frames = frames.astype(np.float64)
+    if timestamps.dtype.kind not in "fiu":
+        # strings or booleans would convert silently; a replay stores numbers
+        raise FrameError(
+            where,
+            f"'timestamps' must be numbers (s); got dtype {timestamps.dtype}",
+        )
     times = np.asarray(timestamps, dtype=np.float64)
     if times.shape != (n,):
         raise FrameError(
