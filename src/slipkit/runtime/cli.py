@@ -417,8 +417,8 @@ def _check_args(args: argparse.Namespace) -> None:
         )
     if args.udp is not None:
         _address(args.udp)
-    if args.send is not None and _address(args.send, "--send")[1] == 0:
-        raise OptionError("--send", f"port must be in [1, 65535]; got {args.send!r}")
+    if args.send is not None:
+        parse_address(args.send, "--send", min_port=1)
     if args.json is not None:
         # Before any work: never over a dataset's, run's or bundle's own files.
         check_out_file(args.json, option="--json")
