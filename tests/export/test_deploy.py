@@ -334,3 +334,23 @@ def test_failed_stream_parity_writes_no_bundle(
     with pytest.raises(SlipkitError, match=r"stream parity failed .* 97\.700 %"):
         export_main(_export_cfg(runs["force_normals"], out))
     assert not out.exists()
+
+
+def test_sign_key_writes_a_signature_the_runtime_checks(
+    runs: dict[str, Path], tmp_path: Path
+) -> None:
+    """export sign_key=<file> writes manifest.hmac: the bundle loads with the key and
+    is refused with another; a key file inside the bundle folder is refused first."""
+    from slipkit.runtime import BundleError
+
+    key = tmp_path / "lab.key"
+    key.write_bytes(b"the lab's key")
+    out = tmp_path / "signed"
+    export_main(_export_cfg(runs["force_normals"], out, f"sign_key={key}"))
+    assert load_bundle(out, key=key.read_bytes()).manifest.name == "signed"
+    with pytest.raises(BundleError, match=r"manifest\.hmac"):
+        load_bundle(out, key=b"another key")
+    inside = tmp_path / "b2"
+    with pytest.raises(SlipkitError, match=r"sign_key: .* is inside the bundle"):
+        export_main(_export_cfg(runs["force_normals"], inside, f"sign_key={inside}/k"))
+    assert not inside.exists()

@@ -470,3 +470,74 @@ def test_replay_timestamps_that_are_not_numbers_are_refused_naming_the_array(
     )
     with pytest.raises(FrameError, match=r"'timestamps' must be numbers \(s\); got"):
         load_replay(path, (3,), 100.0)
+
+
+def _resigned_threshold(case: LinearCase) -> None:
+    """Set the threshold to -1e9 and recompute manifest_sha256, as anyone can."""
+    case.edit_manifest(_set("threshold", -1e9))
+
+
+def test_signed_bundle_refuses_an_edit_with_a_recomputed_digest(
+    tmp_path: Path,
+) -> None:
+    """A bundle written with a key loads with it; after an edit that recomputes
+    manifest_sha256 it still loads without the key (the digest is a checksum) and is
+    refused with it, naming manifest.hmac."""
+    key = b"lab secret \x00\xff"
+    c = LinearCase(tmp_path)
+    man = json.loads((c.path / "manifest.json").read_text())
+    for k in ("files", "manifest_sha256"):
+        man.pop(k)
+    signed = write_bundle(
+        tmp_path / "signed", (c.path / "model.onnx").read_bytes(), man, key=key
+    )
+    assert c.threshold == load_bundle(signed, key=key).manifest.decision.threshold
+    c.path = signed
+    _resigned_threshold(c)
+    assert -1e9 == load_bundle(signed).manifest.decision.threshold
+    with pytest.raises(
+        BundleError, match=r"does not match manifest\.json under the given key"
+    ) as info:
+        load_bundle(signed, key=key)
+    assert str(signed / "manifest.hmac") == info.value.file
+
+
+def test_a_key_refuses_an_unsigned_bundle_and_a_signature_under_another_key(
+    case: LinearCase, tmp_path: Path
+) -> None:
+    """With a key: no manifest.hmac is refused as unsigned; one made with another
+    key is refused as not matching."""
+    from slipkit.runtime.bundle import manifest_hmac
+
+    with pytest.raises(BundleError, match="is missing: the bundle is not signed"):
+        load_bundle(case.path, key=b"k")
+    data = (case.path / "manifest.json").read_bytes()
+    (case.path / "manifest.hmac").write_text(manifest_hmac(data, b"other"))
+    with pytest.raises(BundleError, match="does not match"):
+        load_bundle(case.path, key=b"k")
+    assert (
+        case.threshold
+        == load_bundle(case.path, key=b"other").manifest.decision.threshold
+    )
+
+
+@pytest.mark.parametrize("kind", ["empty", "inside", "missing"])
+def test_key_file_rules_are_named(case: LinearCase, tmp_path: Path, kind: str) -> None:
+    """A key file that is empty, inside the bundle or absent: OptionError naming the option."""
+    from slipkit.runtime import read_key
+    from slipkit.runtime.errors import OptionError
+
+    path = {
+        "empty": tmp_path / "empty.key",
+        "inside": case.path / "lab.key",
+        "missing": tmp_path / "none.key",
+    }[kind]
+    if kind != "missing":
+        path.write_bytes(b"" if kind == "empty" else b"secret")
+    message = {
+        "empty": "is empty",
+        "inside": "is inside the bundle",
+        "missing": "is not a file",
+    }
+    with pytest.raises(OptionError, match=f"--key: .*{message[kind]}"):
+        read_key(path, "--key", bundles=(case.path,))

@@ -279,6 +279,7 @@ def export_main(cfg: DictConfig) -> Path:
     from slipkit.export.frame_gru import StepGraph
     from slipkit.export.parity import STREAM_GAP_PERIODS, check_parity
     from slipkit.runtime import choose_session, load_bundle, write_bundle
+    from slipkit.runtime.bundle import read_key
     from slipkit.runtime.preprocessing import Pipeline
     from slipkit.train.commands import build
     from slipkit.train.data import training_dataset
@@ -299,6 +300,11 @@ def export_main(cfg: DictConfig) -> Path:
         },
         kind="bundle",
         overwrite=bool(cfg.get("overwrite", False)),
+    )
+    key = (
+        read_key(str(cfg.sign_key), "sign_key", bundles=(out,))
+        if cfg.get("sign_key") is not None
+        else None
     )
     name = str(cfg.get("name") or out.name)
     task = build(run.config.task, "task")
@@ -505,6 +511,7 @@ def export_main(cfg: DictConfig) -> Path:
         replay=(frames, times),
         overwrite=bool(cfg.get("overwrite", False)),
         prepare=prepare_bytes,
+        key=key,
     )
     print(
         f"{name}: {type(model).__name__} ({type(task).__name__}) -> ONNX opset "
@@ -548,6 +555,8 @@ def export_main(cfg: DictConfig) -> Path:
         f"{len(dep.trials)} test-side trial(s){classes_note}; "
         + ("held out" if dep.held_out else "held_out: false (parity and latency only)")
     )
+    if key is not None:
+        print(f"  signed: manifest.hmac (HMAC-SHA256 under {cfg.sign_key})")
     print(out)
     return out
 

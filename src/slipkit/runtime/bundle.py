@@ -90,6 +90,8 @@ rest (the SlipTack speed graph: the spectrum of the window with its newest sampl
 
 from __future__ import annotations
 
+import hashlib
+import hmac
 import json
 import math
 import re
@@ -116,7 +118,7 @@ from slipkit.runtime._schema import (
     Fields,
     json_depth,
 )
-from slipkit.runtime.errors import BundleError
+from slipkit.runtime.errors import BundleError, OptionError
 from slipkit.runtime.preprocessing import Pipeline
 from slipkit.runtime.session import ORT_ERRORS, SessionSpec, make_session
 
@@ -138,6 +140,10 @@ DEFAULT_DEADLINE_S = 5.0
 MAX_DEADLINE_S = 3600.0
 #: Recorded frames an exporter may add for ``slipkit-run <bundle>`` and session tuning.
 REPLAY_FILE = "replay.npz"
+#: HMAC-SHA256 of manifest.json's bytes under a key the lab keeps (optional).
+SIGNATURE_FILE = "manifest.hmac"
+#: Largest key file read, bytes.
+MAX_KEY_BYTES = 1 << 16
 
 TOP_FIELDS = (
     "format",
@@ -285,6 +291,78 @@ def manifest_digest(manifest: Mapping[str, Any]) -> str:
     body = {k: v for k, v in manifest.items() if k != DIGEST_FIELD}
     text = json.dumps(body, sort_keys=True, separators=(",", ":"))
     return sha256_bytes(text.encode("ascii"))
+
+
+def manifest_hmac(manifest_bytes: bytes, key: bytes) -> str:
+    """HMAC-SHA256 hex of ``manifest.json``'s bytes under ``key`` (``manifest.hmac``).
+
+    The manifest lists the sha256 of every other file, so the HMAC covers the whole
+    bundle; unlike ``manifest_sha256``, only a holder of the key can make one.
+    """
+    return hmac.new(key, manifest_bytes, hashlib.sha256).hexdigest()
+
+
+def read_key(
+    path: str | Path, option: str, *, bundles: tuple[str | Path, ...] = ()
+) -> bytes:
+    """The bytes of a key file (``slipkit-run --key``, ``slipkit export sign_key=``).
+
+    Refused with an :class:`OptionError` naming ``option``: a path that is not a
+    readable file, an empty file, one over :data:`MAX_KEY_BYTES`, or one inside any
+    of ``bundles`` (a key shipped with the bundle proves nothing).
+    """
+    p = Path(path)
+    try:
+        real = p.resolve()
+        for folder in bundles:
+            if real.is_relative_to(Path(folder).resolve()):
+                raise OptionError(
+                    option,
+                    f"{p} is inside the bundle {folder}: keep the key outside it "
+                    "(a key shipped with the bundle signs anything)",
+                )
+        if not p.is_file():
+            raise OptionError(option, f"{p} is not a file")
+        size = p.stat().st_size
+        if size > MAX_KEY_BYTES:
+            raise OptionError(
+                option, f"{p} is {size} bytes; a key file holds at most {MAX_KEY_BYTES}"
+            )
+        key = p.read_bytes()
+    except (OSError, ValueError) as exc:  # ValueError: a NUL in the path
+        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+        raise OptionError(option, f"cannot read {p}: {why}") from None
+    if not key:
+        raise OptionError(option, f"{p} is empty; a key file holds the key's bytes")
+    return key
+
+
+def _check_hmac(root: Path, manifest_bytes: bytes, key: bytes) -> None:
+    """``manifest.hmac`` exists and is the HMAC of ``manifest_bytes`` under ``key``."""
+    sig = root / SIGNATURE_FILE
+    where = str(sig)
+    try:
+        if not sig.is_file():
+            raise BundleError(
+                where,
+                None,
+                "is missing: the bundle is not signed, and a key was given (export "
+                "it with sign_key=<key file>)",
+            )
+        if sig.stat().st_size > 1024:
+            raise BundleError(where, None, "is over 1024 bytes: not a signature")
+        given = sig.read_bytes().strip().decode("ascii", "replace")
+    except OSError as exc:
+        raise BundleError(
+            where, None, f"cannot be read: {exc.strerror or exc}"
+        ) from None
+    if not hmac.compare_digest(given, manifest_hmac(manifest_bytes, key)):
+        raise BundleError(
+            where,
+            None,
+            f"does not match {MANIFEST_FILE} under the given key: the manifest was "
+            "changed after signing, or signed with another key",
+        )
 
 
 def sign_manifest(manifest: Mapping[str, Any]) -> dict[str, Any]:
@@ -1235,8 +1313,9 @@ def _check_decision_size(
         )
 
 
-def _read_manifest(manifest_path: Path) -> Any:
-    """The decoded manifest.json: size-capped, strict JSON (no NaN), depth-capped."""
+def _read_manifest(manifest_path: Path) -> tuple[Any, bytes]:
+    """The decoded manifest.json and its bytes: size-capped, strict JSON (no NaN),
+    depth-capped."""
     mfile = str(manifest_path)
     try:
         size = manifest_path.stat().st_size
@@ -1267,7 +1346,7 @@ def _read_manifest(manifest_path: Path) -> Any:
         raise BundleError(
             mfile, None, f"is nested {depth} levels deep; at most {MAX_JSON_DEPTH}"
         )
-    return obj
+    return obj, data
 
 
 def _check_digest(obj: Any, mfile: str) -> None:
@@ -1296,6 +1375,7 @@ def load_bundle(
     *,
     session: SessionSpec | None = None,
     deadline_s: float = DEFAULT_DEADLINE_S,
+    key: bytes | None = None,
 ) -> Bundle:
     """Load and check a bundle folder, then build its onnxruntime session.
 
@@ -1318,6 +1398,11 @@ def load_bundle(
         Session options to use instead of the manifest's (for tuning).
     deadline_s : float
         Seconds the graph's first call may take (default 5; in (0, 3600]).
+    key : bytes, optional
+        The lab's signing key (:func:`read_key`): the bundle must then hold
+        ``manifest.hmac``, the HMAC-SHA256 of ``manifest.json``'s bytes under it,
+        checked before anything else in the manifest is read. Without a key
+        ``manifest.hmac`` is not read.
 
     Returns
     -------
@@ -1346,7 +1431,9 @@ def load_bundle(
             None,
             f"load deadline must be in (0, {MAX_DEADLINE_S:g}] s; got {deadline_s!r}",
         )
-    obj = _read_manifest(manifest_path)
+    obj, manifest_bytes = _read_manifest(manifest_path)
+    if key is not None:
+        _check_hmac(root, manifest_bytes, key)
     _check_digest(obj, mfile)
     manifest = validate_manifest(obj, mfile)
     model = prepare_model = b""
@@ -1535,6 +1622,7 @@ def write_bundle(
     replay: tuple[np.ndarray, np.ndarray] | None = None,
     overwrite: bool = False,
     prepare: bytes | None = None,
+    key: bytes | None = None,
 ) -> Path:
     """Write a bundle atomically: a temporary sibling folder, checked, then renamed.
 
@@ -1558,6 +1646,9 @@ def write_bundle(
         under out is refused, as is an out inside a slipkit folder).
     prepare : bytes, optional
         The prepare graph (``prepare.onnx``; the manifest then has ``prepare``).
+    key : bytes, optional
+        Sign the bundle: ``manifest.hmac`` holds :func:`manifest_hmac` of the
+        written ``manifest.json`` under this key.
 
     Returns
     -------
@@ -1614,5 +1705,9 @@ def write_bundle(
         man = sign_manifest(man)
         text = json.dumps(man, indent=2) + "\n"
         (tmp / MANIFEST_FILE).write_text(text, encoding="utf-8")
-        load_bundle(tmp)  # the graph, its IO and the preprocessing, before the rename
+        if key is not None:
+            data = (tmp / MANIFEST_FILE).read_bytes()
+            (tmp / SIGNATURE_FILE).write_text(manifest_hmac(data, key) + "\n")
+        # the graph, its IO, the preprocessing and the signature, before the rename
+        load_bundle(tmp, key=key)
     return target

@@ -725,6 +725,7 @@ def build_streams(
                 bundle = load_bundle(
                     b.bundle,
                     deadline_s=getattr(args, "load_deadline", DEFAULT_DEADLINE_S),
+                    key=getattr(args, "key_bytes", None),  # slipkit-run --key
                 )
                 if rt_opts is not None and rt_opts.pin_threads:
                     bundle = bundle.with_session(
