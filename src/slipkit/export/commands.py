@@ -14,11 +14,15 @@ classes, the latency budget from the data's own frame rate (``frame.rate_hz``; t
 sensor family's ``configs/deploy`` period only when the data has no rate, and
 ``budget_ms.source`` says which), and what the model was scored on and whether it
 was refit on all data; pick the replay trials (every class and group of the test
-side, bounded in frames: :meth:`~slipkit.export.deploy.Deployment.replay_trials`);
+side, bounded in frames: :meth:`~slipkit.export.deploy.Deployment.replay_trials`; a
+gap between trials for a bundle with stream state); for such a bundle, run its loop
+over every held-out trial as one stream with gaps against the model
+(:func:`slipkit.export.parity.stream_parity`; a failure writes nothing);
 measure the session options on the replay frames
 (:func:`slipkit.runtime.choose_session`); write the bundle
 atomically with :func:`slipkit.runtime.write_bundle` (which reloads it before the
-final rename); print a summary and the bundle folder last.
+final rename; ``sign_key``: with ``manifest.hmac``); print a summary and the bundle
+folder last.
 """
 
 from __future__ import annotations

@@ -45,8 +45,12 @@ manifest without that field, as JSON with sorted keys and no whitespace), bounds
 every number (:mod:`slipkit.runtime._schema`, ``MAX_*``), and output ``shape``
 entries that may be ``null`` (a symbolic dimension); :func:`write_bundle` records the
 dtype and shape of every listed output from the graph. The digest catches an edited
-or damaged manifest (a loosened budget, a changed threshold); it is a checksum, not a
-signature: whoever can write the folder can recompute it.
+or damaged manifest (corruption, a partial copy, a hand edit that forgets it); it is
+a checksum, not a signature: whoever can write the folder can recompute it. Against
+that, :func:`write_bundle` with a ``key`` adds ``manifest.hmac``
+(:data:`SIGNATURE_FILE`: :func:`manifest_hmac`, the HMAC-SHA256 of ``manifest.json``'s
+bytes under a key the lab keeps), which :func:`load_bundle` with that ``key`` checks
+first.
 
 Version 3 added, for a multi-class model, ``decision.slip_classes`` (the argmax rule:
 slip when the largest score entry is any of these classes, e.g. every direction of
