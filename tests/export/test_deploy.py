@@ -90,13 +90,21 @@ def _python_vs_loop(bundle_dir: Path, family: str) -> tuple[Any, Any, Any, Any]:
     graph = export(run_model, **FAMILIES[family][1])
     replay = np.load(bundle_dir / "replay.npz")
     frames, times = replay["frames"], replay["timestamps"]
-    inputs, ends = graph_inputs(
-        frames,
-        m["frame"],
-        m["preprocessing"],
-        [int(s) for s in graph.input_shape[1:]],
-        skip_nonfinite=True,
-    )
+    # a gap in the replay (trials of a bundle with stream state) starts a new
+    # recording: each part is its own stream, as the loop reads it
+    cuts = np.flatnonzero(np.diff(times) > 1.5 / m["frame"]["rate_hz"]) + 1
+    parts, part_ends = [], []
+    for a, z in zip(np.r_[0, cuts], np.r_[cuts, len(frames)], strict=True):
+        x, e = graph_inputs(
+            frames[a:z],
+            m["frame"],
+            m["preprocessing"],
+            [int(s) for s in graph.input_shape[1:]],
+            skip_nonfinite=True,
+        )
+        parts.append(x)
+        part_ends.append(e + a)
+    inputs, ends = np.concatenate(parts), np.concatenate(part_ends)
     ref = estimator_score(run_model, graph, inputs)
     py_slip = slip_decisions(ref, m["decision"], m.get("threshold"))
     loop = StreamLoop(bundle)
@@ -275,3 +283,74 @@ def test_task_without_deployer_is_a_clear_error() -> None:
 
     with pytest.raises(SlipkitError, match="deployable tasks"):
         deployer_for(Undeployable())  # type: ignore[arg-type]
+
+
+def test_replay_holds_a_trial_of_every_class_and_wiring_past_the_frame_cap() -> None:
+    """Long trials of one class and wiring fill replay_max_frames; the other class and
+    the other wiring still get their shortest trial each; a hard cap is never passed."""
+    from slipkit.export.deploy import Deployment, HeldOutTrial
+
+    def trial(i: int, n: int, label: str, group: str) -> HeldOutTrial:
+        return HeldOutTrial(
+            f"t{i}", np.zeros((n, 1)), np.arange(n) / 100.0, None, label, group
+        )
+
+    trials = [
+        trial(0, 100, "slip", "falling"),
+        trial(1, 100, "slip", "falling"),
+        trial(2, 300, "no_slip", "falling"),
+        trial(3, 250, "no_slip", "falling"),
+        trial(4, 400, "slip", "rising"),
+    ]
+    dep = Deployment(
+        frame={"rate_hz": 100.0},
+        preprocessing=[],
+        export_options={},
+        positive="slip",
+        debounce_k=1,
+        trials=trials,
+    )
+    assert ["t0", "t1", "t3", "t4"] == [t.trial_id for t in dep.replay_trials(200)]
+    dep.max_replay_frames = 500
+    assert ["t0", "t1", "t3"] == [t.trial_id for t in dep.replay_trials(200)]
+
+
+def test_failed_stream_parity_writes_no_bundle(
+    runs: dict[str, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A baseline_first bundle whose loop over the held-out stream disagrees: one
+    SlipkitError naming the stream parity, and no bundle folder."""
+    import slipkit.export.parity as parity
+
+    real = parity.stream_parity
+
+    def disagreeing(*args: Any, **kwargs: Any) -> dict[str, Any]:
+        report = real(*args, **kwargs)
+        assert report["passed"]  # the real check passes: only its verdict is changed
+        return {**report, "agreement": 0.977, "n_disagree": 214, "passed": False}
+
+    monkeypatch.setattr(parity, "stream_parity", disagreeing)
+    out = tmp_path / "force"
+    with pytest.raises(SlipkitError, match=r"stream parity failed .* 97\.700 %"):
+        export_main(_export_cfg(runs["force_normals"], out))
+    assert not out.exists()
+
+
+def test_sign_key_writes_a_signature_the_runtime_checks(
+    runs: dict[str, Path], tmp_path: Path
+) -> None:
+    """export sign_key=<file> writes manifest.hmac: the bundle loads with the key and
+    is refused with another; a key file inside the bundle folder is refused first."""
+    from slipkit.runtime import BundleError
+
+    key = tmp_path / "lab.key"
+    key.write_bytes(b"the lab's key")
+    out = tmp_path / "signed"
+    export_main(_export_cfg(runs["force_normals"], out, f"sign_key={key}"))
+    assert load_bundle(out, key=key.read_bytes()).manifest.name == "signed"
+    with pytest.raises(BundleError, match=r"manifest\.hmac"):
+        load_bundle(out, key=b"another key")
+    inside = tmp_path / "b2"
+    with pytest.raises(SlipkitError, match=r"sign_key: .* is inside the bundle"):
+        export_main(_export_cfg(runs["force_normals"], inside, f"sign_key={inside}/k"))
+    assert not inside.exists()

@@ -30,6 +30,7 @@ from slipkit.export.detectors import (
 from slipkit.export.registry import ExportError
 from slipkit.runtime.errors import BundleError
 from slipkit.runtime.preprocessing import Pipeline
+from slipkit.runtime.sources import ReplaySource
 
 FORMS = {"paper": {}, "robust": ROBUST}
 
@@ -173,36 +174,48 @@ def _compose(name: str, overrides: list[str]) -> DictConfig:
         return compose(config_name=name, overrides=overrides)
 
 
+@pytest.fixture(scope="module")
+def hard_fsr(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """(run, bundle) of fsr_robust trained on 6 trials of the hard scene (mixed
+    wirings), exported without session choice."""
+    from slipkit.export.commands import export_main
+    from slipkit.train.commands import train_main
+
+    tmp = tmp_path_factory.mktemp("hard_fsr")
+    run_dir, out = tmp / "run", tmp / "bundle"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", PolarityWarning)
+        train_main(
+            _compose(
+                "train",
+                [
+                    "experiment=fsr_robust",
+                    "scene=fsr_probe_slide_hard",
+                    "dataset.n_trials=6",
+                    f"run_dir={run_dir}",
+                ],
+            )
+        )
+        export_main(
+            _compose("export", [f"run={run_dir}", f"out={out}", "choose_session=false"])
+        )
+    return run_dir, out
+
+
 @pytest.mark.filterwarnings("ignore::slipkit.baselines.fsr.PolarityWarning")
 def test_fsr_robust_bundle_on_the_hard_scene_decides_as_the_detector_per_stream(
-    tmp_path: Path,
+    hard_fsr: tuple[Path, Path],
 ) -> None:
     """Trained on the hard scene's mixed wirings, exported, replayed per held-out trial
     through StreamLoop (reset between streams): decisions equal the batch detector's."""
-    from slipkit.export.commands import export_main
     from slipkit.export.deploy import trial_frames
     from slipkit.runtime import StreamLoop, load_bundle
-    from slipkit.train.commands import train_main
     from slipkit.train.data import training_dataset
     from slipkit.train.runs import read_run
 
-    run_dir, out = tmp_path / "run", tmp_path / "bundle"
-    train_main(
-        _compose(
-            "train",
-            [
-                "experiment=fsr_robust",
-                "scene=fsr_probe_slide_hard",
-                "dataset.n_trials=6",
-                f"run_dir={run_dir}",
-            ],
-        )
-    )
+    run_dir, out = hard_fsr
     run = read_run(run_dir)
     assert "per_recording" == run.model.polarity_
-    export_main(
-        _compose("export", [f"run={run_dir}", f"out={out}", "choose_session=false"])
-    )
     raw = json.loads((out / "manifest.json").read_text())
     assert ["press_sign"] == [s["op"] for s in raw["preprocessing"]]
     loop = StreamLoop(load_bundle(out))
@@ -223,6 +236,50 @@ def test_fsr_robust_bundle_on_the_hard_scene_decides_as_the_detector_per_stream(
         assert (ref >= thr).tolist() == res.slip.tolist()
         n_slip += int(res.slip.sum())
     assert n_slip > 0
+
+
+@pytest.mark.filterwarnings("ignore::slipkit.baselines.fsr.PolarityWarning")
+def test_fsr_hard_scene_export_checks_the_loop_over_a_stream_and_replays_each_wiring(
+    hard_fsr: tuple[Path, Path],
+) -> None:
+    """The export ran the loop over every held-out trial as one stream with gaps
+    (stream parity passed); the replay holds trials of both wirings a gap apart, and
+    the bundle's loop over it decides as the detector on each trial."""
+    from slipkit.export.deploy import trial_frames
+    from slipkit.runtime import StreamLoop, load_bundle
+    from slipkit.runtime.sources import load_replay
+    from slipkit.train.data import training_dataset
+    from slipkit.train.runs import read_run
+
+    run_dir, out = hard_fsr
+    raw = json.loads((out / "manifest.json").read_text())
+    stream = raw["training"]["stream_parity"]
+    assert (True, True, 0) == (
+        stream["passed"],
+        stream["calls_match"],
+        stream["n_disagree"],
+    )
+    run = read_run(run_dir)
+    data = training_dataset(run.config)
+    test_ids = json.loads((run_dir / "metrics.json").read_text())["split"]["test"]
+    held = trial_frames(data, test_ids, "fsr", ["voltage"])
+    assert len(held) == stream["recordings"]
+    bundle = load_bundle(out)
+    frames, times = load_replay(out / "replay.npz", (1,), 2000.0)
+    cuts = np.flatnonzero(np.diff(times) > 1.5 / bundle.manifest.frame.rate_hz) + 1
+    parts = np.split(np.arange(len(frames)), cuts)
+    assert raw["training"]["replay"]["trials"] == len(parts)
+    wiring = data.trials.set_index("trial_id")["fsr_polarity.polarity"]
+    seen = set()
+    res = StreamLoop(bundle).run(ReplaySource(frames, times))
+    thr = float(bundle.manifest.decision.threshold or 0.0)
+    for idx in parts:
+        (tr,) = [t for t in held if np.array_equal(t.frames, frames[idx])]
+        seen.add(wiring.loc[tr.trial_id])
+        mine = (res.frame >= idx[0]) & (res.frame <= idx[-1])
+        ref = run.model.decision_function(tr.frames)[res.frame[mine] - idx[0]]
+        assert (ref >= thr).tolist() == res.slip[mine].tolist()
+    assert {"falling", "rising"} == seen
 
 
 # -- a fixed polarity: the rest level from the stream, the sign from fit ---------------------
@@ -451,3 +508,49 @@ def test_alpha_on_a_training_score_moves_halfway_to_the_next_lower(
     det.set_params(threshold=given).fit(exact, np.zeros(len(exact), int))
     expected = 0.5 * (top + below) if on_score else given
     assert expected == det.threshold_
+
+
+def _stream_with_gaps(
+    trials: list[Any], rate_hz: float, gap_periods: float = 10.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """The trials end to end as one stream (frames, timestamps), ``gap_periods``
+    frame periods between one trial's last frame and the next's first."""
+    frames, times, start = [], [], 0.0
+    for tr in trials:
+        t = start + np.arange(len(tr.v)) / rate_hz
+        frames.append(tr.v[:, None])
+        times.append(t)
+        start = float(t[-1]) + gap_periods / rate_hz
+    return np.concatenate(frames), np.concatenate(times)
+
+
+def test_mixed_wiring_bundle_decides_as_the_detector_over_one_stream_with_gaps(
+    tmp_path: Path,
+) -> None:
+    """A per-recording (mixed-wiring) bundle fed four trials of alternating wiring as
+    one stream, a gap between trials: each gap starts a new recording (press_sign
+    reset, window and hop grid restarted), so the loop decides on exactly the
+    detector's instants of each trial, with the detector's decisions."""
+    from slipkit.runtime import StreamLoop, load_bundle
+
+    det = _mixed_detector("paper", 8.0)
+    graph = export_fsr_touch_slip(det)
+    trials = []
+    for seed in (200, 201):
+        trials += fsr_trials(seed, 1, polarity="falling", slide=True)
+        trials += fsr_trials(seed, 1, polarity="rising", slide=True)
+    rate = 2000.0
+    x, t = _stream_with_gaps(trials, rate)
+    loop = StreamLoop(load_bundle(_bundle(graph, tmp_path / "fsr")), capacity=4096)
+    res = loop.run(ReplaySource(x, t))
+    starts = np.r_[0, np.cumsum([len(tr.v) for tr in trials])]
+    expected_frames, expected_slip = [], []
+    for k, tr in enumerate(trials):
+        inst = np.arange(graph.window - 1, len(tr.v), graph.hop)  # each trial's grid
+        ref = det.decision_function(tr.v[:, None])[inst]
+        expected_frames += (starts[k] + inst).tolist()
+        expected_slip += (ref >= det.threshold_).tolist()
+    assert 3 == res.gaps
+    assert expected_frames == res.frame.tolist()
+    assert expected_slip == res.slip.tolist()
+    assert 0 < sum(expected_slip)  # the slides fire: not vacuous

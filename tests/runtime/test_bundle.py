@@ -251,7 +251,9 @@ json_values = st.recursive(
     field=st.sampled_from(["rate_hz", "window", "hop", "shape", "channels"]),
     value=json_values,
 )
-@example(field="shape", value=[993, 1056])  # too large for the window: named as the shape
+@example(
+    field="shape", value=[993, 1056]
+)  # too large for the window: named as the shape
 def test_any_json_value_is_accepted_or_named(field: str, value: Any) -> None:
     """Whatever JSON sits in a frame field, validation accepts it or names that field."""
     man = manifest(12)
@@ -415,3 +417,127 @@ def test_edited_slip_classes_break_the_digest(tmp_path: Path) -> None:
     with pytest.raises(BundleError) as info:
         load_bundle(bundle)
     assert "manifest_sha256" == info.value.field
+
+
+@pytest.mark.parametrize("opset", [16, 18])
+def test_manifest_opset_other_than_the_graphs_is_refused_naming_both(
+    case: LinearCase, opset: int
+) -> None:
+    """A re-signed manifest whose opset is not model.onnx's default-domain opset_import
+    (17) is refused naming the field and both opsets."""
+    case.edit_manifest(_set("opset", opset))
+    with pytest.raises(BundleError) as info:
+        load_bundle(case.path)
+    assert "opset" == info.value.field
+    assert f"is {opset} but model.onnx imports default-domain opset 17" in str(
+        info.value
+    )
+
+
+def test_graph_opsets_are_read_as_onnx_reads_them() -> None:
+    """onnx_opsets (a hand-written protobuf reader) gives onnx's own opset_import, the
+    default domain as '' (also when spelled ai.onnx), the highest of a repeated one."""
+    import onnx
+
+    from slipkit.runtime.bundle import onnx_opsets
+
+    model = onnx.load_from_string(linear_graph(np.ones(3), 0.0, opset=18))
+    model.doc_string = "x" * 300  # a long length-delimited field before the opsets
+    model.opset_import.extend(
+        [
+            onnx.helper.make_opsetid("ai.onnx.ml", 3),
+            onnx.helper.make_opsetid("ai.onnx", 16),
+        ]
+    )
+    assert {"": 18, "ai.onnx.ml": 3} == onnx_opsets(model.SerializeToString())
+    with pytest.raises(ValueError, match="past the end"):
+        onnx_opsets(model.SerializeToString()[:-3])
+
+
+@pytest.mark.parametrize("dtype", ["<U8", "S8", "bool"])
+def test_replay_timestamps_that_are_not_numbers_are_refused_naming_the_array(
+    tmp_path: Path, dtype: str
+) -> None:
+    """Timestamps stored as strings (or booleans) are refused naming 'timestamps',
+    not converted."""
+    from slipkit.runtime.sources import load_replay
+
+    path = tmp_path / "r.npz"
+    np.savez(
+        path,
+        frames=np.zeros((3, 3)),
+        timestamps=np.array([0.0, 0.01, 0.02]).astype(dtype),
+    )
+    with pytest.raises(FrameError, match=r"'timestamps' must be numbers \(s\); got"):
+        load_replay(path, (3,), 100.0)
+
+
+def _resigned_threshold(case: LinearCase) -> None:
+    """Set the threshold to -1e9 and recompute manifest_sha256, as anyone can."""
+    case.edit_manifest(_set("threshold", -1e9))
+
+
+def test_signed_bundle_refuses_an_edit_with_a_recomputed_digest(
+    tmp_path: Path,
+) -> None:
+    """A bundle written with a key loads with it; after an edit that recomputes
+    manifest_sha256 it still loads without the key (the digest is a checksum) and is
+    refused with it, naming manifest.hmac."""
+    key = b"lab secret \x00\xff"
+    c = LinearCase(tmp_path)
+    man = json.loads((c.path / "manifest.json").read_text())
+    for k in ("files", "manifest_sha256"):
+        man.pop(k)
+    signed = write_bundle(
+        tmp_path / "signed", (c.path / "model.onnx").read_bytes(), man, key=key
+    )
+    assert c.threshold == load_bundle(signed, key=key).manifest.decision.threshold
+    c.path = signed
+    _resigned_threshold(c)
+    assert -1e9 == load_bundle(signed).manifest.decision.threshold
+    with pytest.raises(
+        BundleError, match=r"does not match manifest\.json under the given key"
+    ) as info:
+        load_bundle(signed, key=key)
+    assert str(signed / "manifest.hmac") == info.value.file
+
+
+def test_a_key_refuses_an_unsigned_bundle_and_a_signature_under_another_key(
+    case: LinearCase, tmp_path: Path
+) -> None:
+    """With a key: no manifest.hmac is refused as unsigned; one made with another
+    key is refused as not matching."""
+    from slipkit.runtime.bundle import manifest_hmac
+
+    with pytest.raises(BundleError, match="is missing: the bundle is not signed"):
+        load_bundle(case.path, key=b"k")
+    data = (case.path / "manifest.json").read_bytes()
+    (case.path / "manifest.hmac").write_text(manifest_hmac(data, b"other"))
+    with pytest.raises(BundleError, match="does not match"):
+        load_bundle(case.path, key=b"k")
+    assert (
+        case.threshold
+        == load_bundle(case.path, key=b"other").manifest.decision.threshold
+    )
+
+
+@pytest.mark.parametrize("kind", ["empty", "inside", "missing"])
+def test_key_file_rules_are_named(case: LinearCase, tmp_path: Path, kind: str) -> None:
+    """A key file that is empty, inside the bundle or absent: OptionError naming the option."""
+    from slipkit.runtime import read_key
+    from slipkit.runtime.errors import OptionError
+
+    path = {
+        "empty": tmp_path / "empty.key",
+        "inside": case.path / "lab.key",
+        "missing": tmp_path / "none.key",
+    }[kind]
+    if kind != "missing":
+        path.write_bytes(b"" if kind == "empty" else b"secret")
+    message = {
+        "empty": "is empty",
+        "inside": "is inside the bundle",
+        "missing": "is not a file",
+    }
+    with pytest.raises(OptionError, match=f"--key: .*{message[kind]}"):
+        read_key(path, "--key", bundles=(case.path,))

@@ -281,3 +281,50 @@ def test_dos_like_bundle_reports_per_class_decisions(tmp_path: Path) -> None:
     assert list(DOS_CLASSES) == list(by_class)
     assert summary["decisions"] - by_class["t"] == summary["slip_decisions"]
     assert {"p99": 1.0, "frame_period": 10.0} == summary["budget_ms"]
+
+
+def test_key_refuses_a_resigned_manifest_that_passes_check_without_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A signed bundle passes --check with --key; edited to threshold -1e9 with its
+    manifest_sha256 recomputed, it still passes --check without --key, and with
+    --key stops with status 2 and one line naming manifest.hmac."""
+    from tests.runtime.helpers import edit_manifest
+
+    from slipkit.runtime import write_bundle
+
+    c = LinearCase(tmp_path, budget=(1000.0, 100.0))
+    key = tmp_path / "lab.key"
+    key.write_bytes(b"a key the lab keeps")
+    man = json.loads((c.path / "manifest.json").read_text())
+    for k in ("files", "manifest_sha256"):
+        man.pop(k)
+    signed = write_bundle(
+        tmp_path / "signed",
+        (c.path / "model.onnx").read_bytes(),
+        man,
+        replay=(c.frames, c.timestamps),
+        key=key.read_bytes(),
+    )
+    assert 0 == run([str(signed), "--check", "--key", str(key)])
+    edit_manifest(signed, lambda m: m.__setitem__("threshold", -1e9))
+    capsys.readouterr()
+    assert 0 == run([str(signed), "--check"])
+    with pytest.raises(SystemExit) as info:
+        main([str(signed), "--check", "--key", str(key)])
+    err = capsys.readouterr().err.strip()
+    assert 2 == info.value.code
+    assert 1 == len(err.splitlines())
+    assert err.startswith(
+        f"slipkit-run: error: {signed / 'manifest.hmac'}: does not match"
+    )
+
+
+def test_key_inside_the_bundle_is_refused(
+    generous: LinearCase, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--key pointing into the bundle folder: status 2, one line naming --key."""
+    with pytest.raises(SystemExit) as info:
+        main([str(generous.path), "--key", str(generous.path / "manifest.json")])
+    assert 2 == info.value.code
+    assert "slipkit-run: error: --key: " in capsys.readouterr().err

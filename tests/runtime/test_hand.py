@@ -78,6 +78,8 @@ def test_parse_stream_reads_name_bundle_and_source(
         ("a=b@udp:", "needs a target"),
         ("a=@udp:1.2.3.4:5", "no bundle folder"),
         ("a=b@udp:9000", "HOST:PORT"),
+        ("a=B@bogus:xyz", "unknown source kind 'bogus'"),
+        ("a=b@udp:127.0.0.1:70000", "port 70000 is out of range"),
     ],
 )
 def test_parse_stream_names_what_is_wrong(text: str, fragment: str) -> None:

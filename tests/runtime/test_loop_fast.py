@@ -212,3 +212,29 @@ def test_fast_path_only_where_the_input_test_stands_for_the_frame(
     )
     loop = StreamLoop(bundle, io_binding=io_binding)
     assert expected == (getattr(loop.step, "__func__", None) is StreamLoop._step_hop1)
+
+
+@pytest.mark.parametrize(("window", "hop"), [(1, 1), (3, 2)])
+def test_a_gap_starts_a_new_recording_for_a_baseline_bundle(
+    tmp_path: Path, window: int, hop: int
+) -> None:
+    """baseline_first across a gap: the recording after it is scored as a fresh loop
+    scores it alone (its own baseline, window and hop grid), on the fast path too."""
+    pre = [{"op": "baseline_first", "frames": 3, "hop": hop}]
+    path = _bundle(tmp_path, window=window, hop=hop, preprocessing=pre)
+    rng = np.random.default_rng(3)
+    first, second = rng.normal(size=(11, N_CH)), rng.normal(size=(40, N_CH)) + 5.0
+    t1 = np.arange(len(first)) / RATE_HZ
+    t2 = t1[-1] + (10 + np.arange(len(second))) / RATE_HZ  # a gap of 10 periods
+    loop = StreamLoop(load_bundle(path))
+    for row, t in zip([*first, *second], [*t1, *t2], strict=True):
+        loop.step(row, float(t))
+    both = loop.result()
+    alone = StreamLoop(load_bundle(path))
+    for row, t in zip(second, t2, strict=True):
+        alone.step(row, float(t))
+    ref = alone.result()
+    after = both.frame >= len(first)
+    assert 1 == both.gaps
+    assert (ref.frame + len(first)).tolist() == both.frame[after].tolist()
+    np.testing.assert_allclose(ref.score, both.score[after], rtol=1e-6)

@@ -153,3 +153,22 @@ def test_send_and_jsonl_together_carry_the_same_decisions(
     np.testing.assert_allclose(
         [r["score"] for r in rows], [s for _, s in got], rtol=1e-6
     )
+
+
+@pytest.mark.parametrize(
+    ("bad", "message"),
+    [
+        ("127.0.0.1:70000", "port 70000 is out of range: a port is in [1, 65535]"),
+        ("127.0.0.1:0", "port 0 is out of range: a port is in [1, 65535]"),
+        ("127.0.0.1:x", "must be HOST:PORT"),
+    ],
+)
+def test_send_says_a_port_is_out_of_range(
+    case: LinearCase, bad: str, message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A --send port outside 1-65535 is named as out of range, not as a malformed
+    HOST:PORT; a non-number port is."""
+    with pytest.raises(SystemExit) as info:
+        main([str(case.path), "--send", bad])
+    assert 2 == info.value.code
+    assert f"slipkit-run: error: --send: {message}" in capsys.readouterr().err

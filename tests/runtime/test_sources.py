@@ -97,6 +97,32 @@ def test_udp_counts_lost_rejected_and_times_out() -> None:
     assert "not above the last one" in (src.last_error or "")
 
 
+def _big_endian_frame(index: int, ts: float, values: list[float]) -> bytes:
+    """A frame as a sender writing network byte order would (header and values)."""
+    import struct
+
+    head = struct.pack(">4sHHQdI", b"SLPK", 1, 0, index, ts, len(values))
+    return head + np.asarray(values, dtype=">f4").tobytes()
+
+
+def test_big_endian_datagrams_are_rejected_as_such() -> None:
+    """A big-endian frame is never read as garbage values: decode_frame and UdpSource
+    refuse it naming the byte order; a little-endian frame after it is accepted."""
+    data = _big_endian_frame(0, 0.0, [1.0, 2.0, 3.0])
+    with pytest.raises(FrameError, match="big-endian datagram"):
+        decode_frame(data)
+    with (
+        UdpSource("127.0.0.1", 0, (3,), timeout_s=0.2) as src,
+        UdpSender(*src.address) as tx,
+    ):
+        tx.sock.sendto(data, src.address)
+        tx.send(1, 0.01, [1.0, 2.0, 3.0])
+        got = [(f.frame_index, f.values.tolist()) for f in src]
+    assert [(1, [1.0, 2.0, 3.0])] == got
+    assert 1 == src.n_rejected
+    assert "big-endian datagram" in (src.last_error or "")
+
+
 def test_udp_and_replay_give_the_same_decisions(tmp_path: Path) -> None:
     """The loop decides the same on a UDP stream as on the replay of the same float32 frames."""
     c = LinearCase(tmp_path)

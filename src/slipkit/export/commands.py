@@ -14,11 +14,15 @@ classes, the latency budget from the data's own frame rate (``frame.rate_hz``; t
 sensor family's ``configs/deploy`` period only when the data has no rate, and
 ``budget_ms.source`` says which), and what the model was scored on and whether it
 was refit on all data; pick the replay trials (every class and group of the test
-side, bounded in frames: :meth:`~slipkit.export.deploy.Deployment.replay_trials`);
+side, bounded in frames: :meth:`~slipkit.export.deploy.Deployment.replay_trials`; a
+gap between trials for a bundle with stream state); for such a bundle, run its loop
+over every held-out trial as one stream with gaps against the model
+(:func:`slipkit.export.parity.stream_parity`; a failure writes nothing);
 measure the session options on the replay frames
 (:func:`slipkit.runtime.choose_session`); write the bundle
 atomically with :func:`slipkit.runtime.write_bundle` (which reloads it before the
-final rename); print a summary and the bundle folder last.
+final rename; ``sign_key``: with ``manifest.hmac``); print a summary and the bundle
+folder last.
 """
 
 from __future__ import annotations
@@ -194,14 +198,93 @@ def _detector_parity(
     )
 
 
+def _stream_parity(
+    bundle: Path,
+    model: Any,
+    graph: Any,
+    dep: Any,
+    input_shape: list[int],
+    report: Mapping[str, Any],
+    par: Mapping[str, Any],
+) -> dict[str, Any]:
+    """:func:`~slipkit.export.parity.stream_parity` of the probe bundle over every
+    held-out trial, against the detector's own scores or the estimator's on each
+    trial's graph inputs (the runtime's preprocessing, fresh per trial)."""
+    from slipkit.export.deploy import graph_inputs
+    from slipkit.export.parity import estimator_score, stream_parity
+
+    def detector_scores(k: int, ends: Any) -> Any:
+        return model.decision_function(dep.trials[k].frames)[ends]
+
+    def estimator_scores(k: int, ends: Any) -> Any:
+        x, at = graph_inputs(
+            dep.trials[k].frames,
+            dep.frame,
+            dep.preprocessing,
+            input_shape,
+            skip_nonfinite=True,
+        )
+        return estimator_score(model, graph, x[np.searchsorted(at, ends)])
+
+    exact = bool(getattr(graph, "network", False)) or not report.get(
+        "has_decisions", True
+    )
+    return stream_parity(
+        bundle,
+        [t.frames for t in dep.trials],
+        detector_scores if dep.detector else estimator_scores,
+        score_eps=report.get("score_eps"),
+        atol=float(par.get("atol", 1e-4)) if exact else None,
+    )
+
+
+def _stream_parity_error(report: Mapping[str, Any], name: str) -> SlipkitError:
+    calls = (
+        ""
+        if report["calls_match"]
+        else "the loop did not decide on each trial's own window grid; "
+    )
+    return SlipkitError(
+        f"stream parity failed for {name}: over the {report['recordings']} held-out "
+        f"trials as one stream with gaps, {calls}the loop's decisions agree with the "
+        f"model's on {report['agreement'] * 100:.3f} % of {report['n_frames']} calls "
+        f"(need >= 99.9 %), {report['n_disagree']} disagree; no bundle written"
+    )
+
+
+def _replay_sample(
+    dep: Any, chosen: list[Any], max_frames: int | None, gaps: bool
+) -> str:
+    """What the replay holds, for ``training.replay.note``."""
+    n, total = len(chosen), len(dep.trials)
+    what = (
+        f"all {total} test-side trials"
+        if n == total
+        and all(
+            len(c.frames) == len(t.frames)
+            for c, t in zip(chosen, dep.trials, strict=False)
+        )
+        else f"{n} of the {total} test-side trials (replay_max_frames={max_frames}; "
+        "every class and group has one)"
+    )
+    return what + (
+        ", ten frame periods apart (a gap: each trial starts a new recording)"
+        if gaps
+        else ", one frame period apart"
+    )
+
+
 def export_main(cfg: DictConfig) -> Path:
     """Export the run ``cfg.run`` as a bundle; print the bundle folder last and return it."""
     from slipkit.export import export  # registers the built-in exporters
     from slipkit.export import force as _force  # noqa: F401  (registers force exporters)
     from slipkit.export.deploy import deployment, held_out_inputs
+    from slipkit.export.detectors import DetectorGraph
     from slipkit.export.frame_gru import StepGraph
-    from slipkit.export.parity import check_parity
+    from slipkit.export.parity import STREAM_GAP_PERIODS, check_parity
     from slipkit.runtime import choose_session, load_bundle, write_bundle
+    from slipkit.runtime.bundle import read_key
+    from slipkit.runtime.preprocessing import Pipeline
     from slipkit.train.commands import build
     from slipkit.train.data import training_dataset
     from slipkit.train.runs import read_run
@@ -221,6 +304,11 @@ def export_main(cfg: DictConfig) -> Path:
         },
         kind="bundle",
         overwrite=bool(cfg.get("overwrite", False)),
+    )
+    key = (
+        read_key(str(cfg.sign_key), "sign_key", bundles=(out,))
+        if cfg.get("sign_key") is not None
+        else None
     )
     name = str(cfg.get("name") or out.name)
     task = build(run.config.task, "task")
@@ -277,10 +365,19 @@ def export_main(cfg: DictConfig) -> Path:
         None if cfg.get("replay_max_frames") is None else int(cfg.replay_max_frames)
     )
     replay_trials = dep.replay_trials(replay_max)
-    # A recurrent bundle's replay leaves a gap between trials: the loop resets its
-    # state there (docs/deploy.md, "Recurrent state"), so each trial starts fresh.
+    # A bundle with stream state (a recurrent state, or an op such as press_sign
+    # that latches a level at the stream's start) reads a gap as a new recording
+    # (docs/deploy.md, "Stream state"): its replay leaves one between trials, so
+    # each trial starts fresh, as in training and in the parity check.
+    stream_state = isinstance(graph, StepGraph) or bool(
+        Pipeline(
+            dep.preprocessing,
+            (int(dep.frame["window"]), *dep.frame_shape),
+            "manifest.json",
+        ).stream_state
+    )
     frames, times = dep.replay(
-        replay_max, gap_periods=10.0 if isinstance(graph, StepGraph) else 1.0
+        replay_max, gap_periods=STREAM_GAP_PERIODS if stream_state else 1.0
     )
     replay_by_class: dict[str, int] = {}
     for tr in replay_trials:
@@ -288,11 +385,15 @@ def export_main(cfg: DictConfig) -> Path:
             replay_by_class[tr.label] = replay_by_class.get(tr.label, 0) + 1
     scored_on = dep.scored_on or "the run's held-out test split"
     replay_note = (
-        "held-out trials: the replay checks parity, decisions and latency on data the "
-        "model never saw"
-        if dep.held_out
-        else "the saved model was refit on all data, these trials included: the "
-        "replay checks parity and latency, not accuracy (accuracy: scored_on)"
+        (
+            "held-out trials: the replay checks parity, decisions and latency on data the "
+            "model never saw"
+            if dep.held_out
+            else "the saved model was refit on all data, these trials included: the "
+            "replay checks parity and latency, not accuracy (accuracy: scored_on)"
+        )
+        + "; "
+        + _replay_sample(dep, replay_trials, replay_max, stream_state)
     )
     import onnxruntime
 
@@ -324,7 +425,7 @@ def export_main(cfg: DictConfig) -> Path:
         # a prepare graph run on the frame before each decision (docs/deploy.md)
         **(
             {"prepare": {"tensor": graph.prepare_tensor}}
-            if getattr(graph, "prepare", None) is not None
+            if isinstance(graph, DetectorGraph) and graph.prepare is not None
             else {}
         ),
         "debounce": {"k": int(dep.debounce_k)},
@@ -366,11 +467,16 @@ def export_main(cfg: DictConfig) -> Path:
     model_bytes = graph.serialize()
     prepare_bytes = (
         graph.serialize_prepare()
-        if getattr(graph, "prepare", None) is not None
+        if isinstance(graph, DetectorGraph) and graph.prepare is not None
         else None
     )
     session_note = "defaults"
-    if bool(cfg.get("choose_session", True)):
+    choose = bool(cfg.get("choose_session", True))
+    # a recurrent graph's parity already ran through the loop over a stream with gaps
+    stream_check = stream_state and not isinstance(graph, StepGraph)
+    stream_report: dict[str, Any] | None = None
+    rows: list[dict[str, Any]] = []
+    if choose or stream_check:
         sess_cfg = cfg.get("session") or {}
         with tempfile.TemporaryDirectory(prefix="slipkit-export-") as tmp:
             probe = write_bundle(
@@ -380,13 +486,21 @@ def export_main(cfg: DictConfig) -> Path:
                 replay=(frames, times),
                 prepare=prepare_bytes,
             )
-            rows = choose_session(
-                load_bundle(probe),
-                frames,
-                times,
-                rounds=int(sess_cfg.get("rounds", 3)),
-                max_frames=int(sess_cfg.get("max_frames", 500)),
-            )
+            if stream_check:
+                stream_report = _stream_parity(
+                    probe, model, graph, dep, input_shape, report, par
+                )
+                if not stream_report["passed"]:
+                    raise _stream_parity_error(stream_report, name)
+                manifest["training"]["stream_parity"] = _finite(stream_report)
+            if choose:
+                rows = choose_session(
+                    load_bundle(probe),
+                    frames,
+                    times,
+                    rounds=int(sess_cfg.get("rounds", 3)),
+                    max_frames=int(sess_cfg.get("max_frames", 500)),
+                )
         if rows:
             manifest["session"] = rows[0]["session"]
             session_note = (
@@ -400,6 +514,7 @@ def export_main(cfg: DictConfig) -> Path:
         replay=(frames, times),
         overwrite=bool(cfg.get("overwrite", False)),
         prepare=prepare_bytes,
+        key=key,
     )
     print(
         f"{name}: {type(model).__name__} ({type(task).__name__}) -> ONNX opset "
@@ -411,6 +526,12 @@ def export_main(cfg: DictConfig) -> Path:
         f"  parity on {report['n_frames']} {side} calls: agreement "
         f"{report['agreement'] * 100:.2f} %, max |score diff| {report['max_abs_diff']:.3g}"
     )
+    if stream_report is not None:
+        print(
+            f"  stream parity (the loop over the {stream_report['recordings']} "
+            f"{side} trials as one stream, a gap between trials): agreement "
+            f"{stream_report['agreement'] * 100:.2f} % of {stream_report['n_frames']} calls"
+        )
     if decision.get("rule") == "argmax":
         print(
             f"  classes {decision['classes']}; slip classes {decision['slip_classes']}"
@@ -437,6 +558,8 @@ def export_main(cfg: DictConfig) -> Path:
         f"{len(dep.trials)} test-side trial(s){classes_note}; "
         + ("held out" if dep.held_out else "held_out: false (parity and latency only)")
     )
+    if key is not None:
+        print(f"  signed: manifest.hmac (HMAC-SHA256 under {cfg.sign_key})")
     print(out)
     return out
 

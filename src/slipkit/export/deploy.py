@@ -82,6 +82,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -200,20 +201,22 @@ class Deployment:
 
         The trials are ranked round-robin over the classes (each class gives its
         next trial before any class gives another), and within a class
-        round-robin over its groups (objects), class ``c`` starting at its
-        ``c``-th group so that the first round already spans the objects; within
-        a (class, group) the picks are spread over its trials (:func:`_spread`).
-        So a bounded replay holds trials of every class and object from the
-        whole test side, not the first trials, which a class-ordered dataset
-        would fill with its first classes. In that rank, a trial that would
-        exceed ``max_frames`` is passed over for a shorter one; the chosen trials
-        keep their original order. When no whole trial fits, the first trial is
-        cut to ``max_frames``. ``max_replay_frames`` caps ``max_frames``.
+        round-robin over its groups (objects, or the FSR wiring), class ``c``
+        starting at its ``c``-th group so that the first round already spans the
+        groups; within a (class, group) the picks are spread over its trials
+        (:func:`_spread`). So a bounded replay holds trials of every class and
+        group from the whole test side, not the first trials, which a
+        class-ordered dataset would fill with its first classes. In that rank, a
+        trial that would exceed ``max_frames`` is passed over for a shorter one;
+        then every class and every group that has no trial yet gets its shortest
+        one, even past ``max_frames`` (at most one per class and group); the
+        chosen trials keep their original order. When no whole trial fits, the
+        first trial is cut to ``max_frames``. ``max_replay_frames`` caps
+        ``max_frames`` and is never exceeded.
         """
-        if self.max_replay_frames is not None:
-            max_frames = min(
-                max_frames or self.max_replay_frames, self.max_replay_frames
-            )
+        hard = self.max_replay_frames
+        if hard is not None:
+            max_frames = min(max_frames or hard, hard)
         if max_frames is None:
             return list(self.trials)
         order = _stratified_order(
@@ -237,6 +240,16 @@ class Deployment:
                     tr.group,
                 )
             ]
+        for key in ("label", "group"):
+            for value in dict.fromkeys(getattr(self.trials[i], key) for i in order):
+                have = [i for i in order if getattr(self.trials[i], key) == value]
+                if value is None or set(have) & set(chosen):
+                    continue
+                i = min(have, key=lambda j: len(self.trials[j].frames))
+                n = len(self.trials[i].frames)
+                if hard is None or total + n <= hard:
+                    chosen.append(i)
+                    total += n
         return [self.trials[i] for i in sorted(chosen)]
 
     def replay(
@@ -386,26 +399,37 @@ def graph_inputs(
     ends : ndarray of int
         Frame index that completes each decision's window.
     """
-    window, hop = int(frame["window"]), int(frame.get("hop", 1))
+    window = int(frame["window"])
     shape = tuple(int(s) for s in frame["shape"])
     x = np.asarray(frames, dtype=np.float64).reshape(len(frames), *shape)
     pipeline = Pipeline(list(preprocessing), (window, *shape), "manifest.json")
-    ends = decision_ends(len(x), window, hop)
-    if skip_nonfinite:
-        from slipkit.runtime.loop import NAN_IS_MISSING_STREAMS
-
-        flat = x.reshape(len(x), -1)
-        streams = set(frame.get("streams") or ())
-        if streams and streams <= NAN_IS_MISSING_STREAMS:
-            ok = ~np.isinf(flat).any(axis=1)  # NaN means "missing" (TacTip pins)
-        else:
-            ok = np.isfinite(flat).all(axis=1)
-        bad = np.concatenate([[0], np.cumsum(~ok)])
-        ends = ends[bad[ends + 1] - bad[ends + 1 - window] == 0]
+    ends = loop_ends(x, frame, skip_nonfinite=skip_nonfinite)
     out = np.empty((len(ends), *(int(s) for s in input_shape)))
     for i, end in enumerate(ends):
         out[i] = np.reshape(pipeline(x[end - window + 1 : end + 1]), out.shape[1:])
     return out, ends
+
+
+def loop_ends(
+    frames: NDArray[np.floating], frame: Mapping[str, Any], *, skip_nonfinite: bool
+) -> NDArray[np.intp]:
+    """The frames of one stream on which the loop decides (:func:`decision_ends`);
+    with ``skip_nonfinite``, without the windows holding a frame the loop flags (an
+    infinity, or a NaN unless every stream reads NaN as "missing")."""
+    window, hop = int(frame["window"]), int(frame.get("hop", 1))
+    ends = decision_ends(len(frames), window, hop)
+    if not skip_nonfinite:
+        return ends
+    from slipkit.runtime.loop import NAN_IS_MISSING_STREAMS
+
+    flat = np.asarray(frames, dtype=np.float64).reshape(len(frames), -1)
+    streams = set(frame.get("streams") or ())
+    if streams and streams <= NAN_IS_MISSING_STREAMS:
+        ok = ~np.isinf(flat).any(axis=1)  # NaN means "missing" (TacTip pins)
+    else:
+        ok = np.isfinite(flat).all(axis=1)
+    bad = np.concatenate([[0], np.cumsum(~ok)])
+    return ends[bad[ends + 1] - bad[ends + 1 - window] == 0]
 
 
 def held_out_inputs(
@@ -921,7 +945,7 @@ def _deploy_detection(
         export_options=export_options,
         positive=positive,
         debounce_k=int(options.get("debounce_k") or 1),
-        trials=held,
+        trials=_detection_classes(dataset, held, task.label, task.group_by),
         model=deployed,
         notes=[
             f"raw samples of {stream!r} ({', '.join(channels)}) at {rate:g} Hz; the graph "
@@ -930,6 +954,43 @@ def _deploy_detection(
         ],
         detector=True,
     )
+
+
+#: A trials column naming the FSR wiring (the fsr_polarity effect); the replay covers each.
+WIRING_COLUMN = "fsr_polarity.polarity"
+
+
+def _detection_classes(
+    dataset: Dataset,
+    trials: Sequence[HeldOutTrial],
+    onset: str | None,
+    group_by: str | None,
+) -> list[HeldOutTrial]:
+    """Held-out recordings with a class (``slip``: a finite ``onset`` label, else
+    ``no_slip``; None without the label) and a group (the FSR wiring when the trials
+    record it, else ``group_by``), so that the replay samples each."""
+    columns = dataset.trials.columns
+    group = WIRING_COLUMN if WIRING_COLUMN in columns else group_by
+    out = trial_classes(dataset, trials, None, group)
+    if onset is None or onset not in columns:
+        return out
+    table = dataset.trials.set_index(dataset.trials["trial_id"].astype(str))
+    labelled = []
+    for t in out:
+        value = _as_float(table.at[t.trial_id, onset])
+        label = "slip" if np.isfinite(value) else "no_slip"
+        labelled.append(
+            HeldOutTrial(t.trial_id, t.frames, t.timestamps, t.keep, label, t.group)
+        )
+    return labelled
+
+
+def _as_float(value: Any) -> float:
+    """A table cell as a float (NaN when it is missing or not a number)."""
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return math.nan
 
 
 def _register_builtin() -> None:

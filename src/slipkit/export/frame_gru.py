@@ -242,8 +242,10 @@ def check_step_parity(
     rate_hz: float,
     tol: float = PARITY_TOL,
 ) -> dict[str, Any]:
-    """Run the bundle through :class:`StreamLoop` over each recording (a reset between
-    them) and compare its scores with ``detector.decision_function``, frame by frame.
+    """Run the bundle through :class:`StreamLoop` over the recordings as one stream,
+    ten frame periods between one's last frame and the next's first (a gap: the loop
+    zeros the state, as a new recording), and compare its scores with
+    ``detector.decision_function`` of each recording, frame by frame.
 
     Returns
     -------
@@ -253,28 +255,32 @@ def check_step_parity(
         (scored frames), ``agreement``, ``n_disagree``, ``score_eps`` (= ``tol``),
         ``disagreements_near_threshold`` and ``passed`` (= ``ok``).
     """
+    from slipkit.export.parity import STREAM_GAP_PERIODS
     from slipkit.runtime import StreamLoop, load_bundle
 
     loop = StreamLoop(load_bundle(bundle_path), capacity=4096)
-    worst, frames, same, scored_n, disagree = 0.0, 0, True, 0, 0
-    for rec in recordings:
-        x = np.asarray(rec, dtype=np.float64)
-        want = detector.decision_function(x)
-        loop.reset()
+    xs = [np.asarray(rec, dtype=np.float64) for rec in recordings]
+    t0 = 0.0
+    for x in xs:
         for i, row in enumerate(x):
-            loop.step(row, i / float(rate_hz))
-        res = loop.result()
+            loop.step(row, t0 + i / float(rate_hz))
+        t0 += (len(x) - 1 + STREAM_GAP_PERIODS) / float(rate_hz)
+    res = loop.result()
+    worst, frames, same, scored_n, disagree = 0.0, 0, True, 0, 0
+    for x in xs:
+        want = detector.decision_function(x)
+        mine = (res.frame >= frames) & (res.frame < frames + len(x))
         scored = np.isfinite(want)
-        if not np.array_equal(res.frame, np.flatnonzero(scored)):
+        if not np.array_equal(res.frame[mine] - frames, np.flatnonzero(scored)):
             raise ExportError(
                 "the loop scored other frames than the detector: "
-                f"{len(res.frame)} against {int(scored.sum())}"
+                f"{int(mine.sum())} against {int(scored.sum())}"
             )
-        diff = np.abs(res.score - want[scored])
+        diff = np.abs(res.score[mine] - want[scored])
         worst = max(worst, float(diff.max(initial=0.0)))
         # decisions may differ only where the score is within tol of the threshold
         close = np.abs(want[scored] - detector.threshold_) <= tol
-        differ = res.slip != (want[scored] >= detector.threshold_)
+        differ = res.slip[mine] != (want[scored] >= detector.threshold_)
         same &= bool(np.all(~differ | close))
         disagree += int(differ.sum())
         scored_n += int(scored.sum())

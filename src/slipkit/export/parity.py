@@ -1,5 +1,10 @@
 """Parity of an exported graph with its estimator, on held-out frames (issue 6's rule).
 
+:func:`check_parity` compares the graph with the estimator window by window;
+:func:`stream_parity` runs a bundle's loop over the held-out recordings as one
+stream with gaps, as the gripper PC sees them, for bundles whose decisions depend on
+earlier frames (stream state).
+
 The graph runs in onnxruntime (CPU provider, one intra- and one inter-op
 thread, as on the gripper PC) on the frames cast to the graph's input dtype
 (float32, or float64 where :attr:`ExportedGraph.input_dtype` says so); the estimator runs
@@ -24,6 +29,8 @@ outputs all lie within ``atol``.
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -204,5 +211,153 @@ def check_parity(
         "atol": atol,
         "disagreements_near_threshold": near,
         "has_decisions": has_decisions,
+        "passed": bool(passed),
+    }
+
+
+#: Frame periods between two held-out recordings in the stream of :func:`stream_parity`:
+#: more than the loop's ``max_gap_periods`` (1.5), so each boundary is a gap.
+STREAM_GAP_PERIODS = 10.0
+
+
+def stream_parity(
+    bundle_path: Any,
+    recordings: Sequence[ArrayLike],
+    reference: Callable[[int, NDArray[np.intp]], ArrayLike],
+    *,
+    score_eps: float | None = None,
+    atol: float | None = None,
+    gap_periods: float = STREAM_GAP_PERIODS,
+) -> dict[str, Any]:
+    """A bundle through :class:`~slipkit.runtime.StreamLoop` over held-out recordings
+    joined into one stream, as the runtime sees them, against the model per recording.
+
+    The recordings follow each other with ``gap_periods`` frame periods between one's
+    last frame and the next's first (timestamps at the bundle's rate), so a bundle
+    with stream state starts each from scratch (``docs/deploy.md``, *Stream
+    state*). Each decision is mapped to its recording and frame there; the loop must
+    decide on exactly each recording's own grid (``window - 1 + j hop``, less the
+    windows it skips for a non-finite frame or input), and its decisions must agree
+    with the reference's as :func:`check_parity`'s rule says (>= 99.9 % of calls,
+    every disagreement within ``score_eps`` of the threshold; ``atol`` on the
+    scores when given).
+
+    Parameters
+    ----------
+    bundle_path : path
+        The bundle folder (a temporary one during ``slipkit export``).
+    recordings : sequence of array_like (n, *frame.shape)
+        The held-out recordings, raw frames.
+    reference : callable
+        ``reference(k, ends)``: the model's own score output for recording ``k`` at
+        its (0-based) frames ``ends``, one row per frame, as the manifest's decision
+        reads it.
+    score_eps : float, optional
+        Default: 1e-4 x the largest finite |reference score|, at least 1e-4.
+    atol : float, optional
+        Max |loop score - reference score| (networks and regressors); None: not checked.
+
+    Returns
+    -------
+    dict
+        ``recordings``, ``frames`` (pushed), ``gaps``, ``n_frames`` (decisions
+        compared), ``calls_match`` (the loop decided on each recording's grid),
+        ``agreement``, ``n_disagree``, ``max_abs_diff``, ``score_eps``, ``atol``,
+        ``disagreements_near_threshold`` and ``passed``.
+    """
+    from slipkit.export.deploy import loop_ends, slip_decisions
+    from slipkit.runtime import StreamLoop, load_bundle
+    from slipkit.runtime.sources import Frame
+
+    bundle = load_bundle(bundle_path)
+    m = bundle.manifest
+    frame = {
+        "window": m.frame.window,
+        "hop": m.frame.hop,
+        "streams": list(m.frame.streams),
+    }
+    xs = [
+        np.asarray(r, dtype=np.float64).reshape(-1, *m.frame.shape) for r in recordings
+    ]
+    starts = np.cumsum([0] + [len(x) for x in xs])
+    period = 1.0 / m.frame.rate_hz
+
+    def stream() -> Any:
+        t0, clock = 0.0, time.perf_counter_ns
+        for x in xs:
+            for i, row in enumerate(x):
+                yield Frame(i, t0 + i * period, row, clock())
+            t0 += (len(x) - 1 + gap_periods) * period
+
+    loop = StreamLoop(bundle, capacity=max(int(starts[-1]) // m.frame.hop + 1, 16))
+    res = loop.run(stream())
+    rec = np.searchsorted(starts, res.frame, side="right") - 1
+    local = res.frame - starts[rec]
+    d = m.decision
+    decision = dict(m.raw["decision"])
+    loop_slip, loop_score = res.slip, res.score
+    ref_slip, ref_score, margin = [], [], []
+    calls_match = True
+    missing = 0
+    order = []
+    for k, x in enumerate(xs):
+        mine = np.flatnonzero(rec == k)
+        want = loop_ends(x, frame, skip_nonfinite=True)
+        ends = local[mine].astype(np.intp)
+        if not np.all(np.isin(ends, want)):
+            calls_match = False
+        missing += len(want) - int(np.isin(want, ends).sum())
+        if not len(ends):
+            continue
+        raw = np.asarray(reference(k, ends), dtype=np.float64).reshape(len(ends), -1)
+        ref_slip.append(slip_decisions(raw, decision, d.threshold))
+        if d.rule == "argmax":
+            ref_score.append(raw[:, list(d.slip_columns)].max(axis=1))
+            top2 = np.sort(raw, axis=1)[:, -2:]
+            margin.append((top2[:, 1] - top2[:, 0]) / 2.0)
+        else:
+            col = raw[:, d.column]
+            ref_score.append(col)
+            thr = 0.0 if d.threshold is None else d.threshold
+            with np.errstate(invalid="ignore"):
+                margin.append(np.where(np.isnan(col), np.inf, np.abs(col - thr)))
+        order.append(mine)
+    if missing != res.nonfinite_windows:
+        calls_match = False
+    if not order:
+        raise ExportError("stream parity: the loop made no decision on the recordings")
+    idx = np.concatenate(order)
+    want_slip, want_score = np.concatenate(ref_slip), np.concatenate(ref_score)
+    gap = np.concatenate(margin)
+    disagree = want_slip != loop_slip[idx]
+    finite = np.isfinite(want_score) & np.isfinite(loop_score[idx])
+    diff = np.abs(want_score[finite] - loop_score[idx][finite])
+    scale = float(np.max(np.abs(want_score[finite]))) if finite.any() else 0.0
+    eps = (
+        max(DEFAULT_EPS_REL * scale, DEFAULT_EPS_REL)
+        if score_eps is None
+        else float(score_eps)
+    )
+    near = bool(np.all(gap[disagree] <= eps))
+    agreement = 1.0 - float(np.mean(disagree))
+    max_abs = float(diff.max()) if diff.size else 0.0
+    passed = (
+        calls_match
+        and agreement >= MIN_AGREEMENT
+        and near
+        and (atol is None or max_abs <= atol)
+    )
+    return {
+        "recordings": len(xs),
+        "frames": int(starts[-1]),
+        "gaps": res.gaps,
+        "n_frames": len(idx),
+        "calls_match": calls_match,
+        "agreement": agreement,
+        "n_disagree": int(disagree.sum()),
+        "max_abs_diff": max_abs,
+        "score_eps": eps,
+        "atol": atol,
+        "disagreements_near_threshold": near,
         "passed": bool(passed),
     }

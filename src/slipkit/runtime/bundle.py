@@ -45,8 +45,12 @@ manifest without that field, as JSON with sorted keys and no whitespace), bounds
 every number (:mod:`slipkit.runtime._schema`, ``MAX_*``), and output ``shape``
 entries that may be ``null`` (a symbolic dimension); :func:`write_bundle` records the
 dtype and shape of every listed output from the graph. The digest catches an edited
-or damaged manifest (a loosened budget, a changed threshold); it is a checksum, not a
-signature: whoever can write the folder can recompute it.
+or damaged manifest (corruption, a partial copy, a hand edit that forgets it); it is
+a checksum, not a signature: whoever can write the folder can recompute it. Against
+that, :func:`write_bundle` with a ``key`` adds ``manifest.hmac``
+(:data:`SIGNATURE_FILE`: :func:`manifest_hmac`, the HMAC-SHA256 of ``manifest.json``'s
+bytes under a key the lab keeps), which :func:`load_bundle` with that ``key`` checks
+first.
 
 Version 3 added, for a multi-class model, ``decision.slip_classes`` (the argmax rule:
 slip when the largest score entry is any of these classes, e.g. every direction of
@@ -90,6 +94,8 @@ rest (the SlipTack speed graph: the spectrum of the window with its newest sampl
 
 from __future__ import annotations
 
+import hashlib
+import hmac
 import json
 import math
 import re
@@ -116,7 +122,7 @@ from slipkit.runtime._schema import (
     Fields,
     json_depth,
 )
-from slipkit.runtime.errors import BundleError
+from slipkit.runtime.errors import BundleError, OptionError
 from slipkit.runtime.preprocessing import Pipeline
 from slipkit.runtime.session import ORT_ERRORS, SessionSpec, make_session
 
@@ -138,6 +144,10 @@ DEFAULT_DEADLINE_S = 5.0
 MAX_DEADLINE_S = 3600.0
 #: Recorded frames an exporter may add for ``slipkit-run <bundle>`` and session tuning.
 REPLAY_FILE = "replay.npz"
+#: HMAC-SHA256 of manifest.json's bytes under a key the lab keeps (optional).
+SIGNATURE_FILE = "manifest.hmac"
+#: Largest key file read, bytes.
+MAX_KEY_BYTES = 1 << 16
 
 TOP_FIELDS = (
     "format",
@@ -285,6 +295,78 @@ def manifest_digest(manifest: Mapping[str, Any]) -> str:
     body = {k: v for k, v in manifest.items() if k != DIGEST_FIELD}
     text = json.dumps(body, sort_keys=True, separators=(",", ":"))
     return sha256_bytes(text.encode("ascii"))
+
+
+def manifest_hmac(manifest_bytes: bytes, key: bytes) -> str:
+    """HMAC-SHA256 hex of ``manifest.json``'s bytes under ``key`` (``manifest.hmac``).
+
+    The manifest lists the sha256 of every other file, so the HMAC covers the whole
+    bundle; unlike ``manifest_sha256``, only a holder of the key can make one.
+    """
+    return hmac.new(key, manifest_bytes, hashlib.sha256).hexdigest()
+
+
+def read_key(
+    path: str | Path, option: str, *, bundles: tuple[str | Path, ...] = ()
+) -> bytes:
+    """The bytes of a key file (``slipkit-run --key``, ``slipkit export sign_key=``).
+
+    Refused with an :class:`OptionError` naming ``option``: a path that is not a
+    readable file, an empty file, one over :data:`MAX_KEY_BYTES`, or one inside any
+    of ``bundles`` (a key shipped with the bundle proves nothing).
+    """
+    p = Path(path)
+    try:
+        real = p.resolve()
+        for folder in bundles:
+            if real.is_relative_to(Path(folder).resolve()):
+                raise OptionError(
+                    option,
+                    f"{p} is inside the bundle {folder}: keep the key outside it "
+                    "(a key shipped with the bundle signs anything)",
+                )
+        if not p.is_file():
+            raise OptionError(option, f"{p} is not a file")
+        size = p.stat().st_size
+        if size > MAX_KEY_BYTES:
+            raise OptionError(
+                option, f"{p} is {size} bytes; a key file holds at most {MAX_KEY_BYTES}"
+            )
+        key = p.read_bytes()
+    except (OSError, ValueError) as exc:  # ValueError: a NUL in the path
+        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+        raise OptionError(option, f"cannot read {p}: {why}") from None
+    if not key:
+        raise OptionError(option, f"{p} is empty; a key file holds the key's bytes")
+    return key
+
+
+def _check_hmac(root: Path, manifest_bytes: bytes, key: bytes) -> None:
+    """``manifest.hmac`` exists and is the HMAC of ``manifest_bytes`` under ``key``."""
+    sig = root / SIGNATURE_FILE
+    where = str(sig)
+    try:
+        if not sig.is_file():
+            raise BundleError(
+                where,
+                None,
+                "is missing: the bundle is not signed, and a key was given (export "
+                "it with sign_key=<key file>)",
+            )
+        if sig.stat().st_size > 1024:
+            raise BundleError(where, None, "is over 1024 bytes: not a signature")
+        given = sig.read_bytes().strip().decode("ascii", "replace")
+    except OSError as exc:
+        raise BundleError(
+            where, None, f"cannot be read: {exc.strerror or exc}"
+        ) from None
+    if not hmac.compare_digest(given, manifest_hmac(manifest_bytes, key)):
+        raise BundleError(
+            where,
+            None,
+            f"does not match {MANIFEST_FILE} under the given key: the manifest was "
+            "changed after signing, or signed with another key",
+        )
 
 
 def sign_manifest(manifest: Mapping[str, Any]) -> dict[str, Any]:
@@ -965,6 +1047,101 @@ def run_with_deadline(
         timer.cancel()
 
 
+def _varint(data: bytes, pos: int) -> tuple[int, int]:
+    """A protobuf varint at ``pos``: (value, position after it)."""
+    value = shift = 0
+    while True:
+        if pos >= len(data) or shift > 63:
+            raise ValueError("a varint runs past the end")
+        byte = data[pos]
+        pos += 1
+        value |= (byte & 0x7F) << shift
+        shift += 7
+        if byte < 0x80:
+            return value, pos
+
+
+def _proto_fields(data: bytes) -> list[tuple[int, int | bytes]]:
+    """The top-level fields of a protobuf message: (field number, varint or bytes).
+
+    Fixed-width fields are skipped; groups (wire types 3, 4) are refused.
+    """
+    out: list[tuple[int, int | bytes]] = []
+    pos = 0
+    while pos < len(data):
+        key, pos = _varint(data, pos)
+        number, wire = key >> 3, key & 7
+        if wire == 0:
+            value, pos = _varint(data, pos)
+            out.append((number, value))
+        elif wire == 2:
+            size, pos = _varint(data, pos)
+            if pos + size > len(data):
+                raise ValueError("a field runs past the end")
+            out.append((number, data[pos : pos + size]))
+            pos += size
+        elif wire in (1, 5):
+            pos += 8 if wire == 1 else 4
+        else:
+            raise ValueError(f"wire type {wire} is not read here")
+    return out
+
+
+def onnx_opsets(model: bytes) -> dict[str, int]:
+    """A serialised ONNX model's ``opset_import``: domain -> version (the highest
+    when a domain is listed twice; the default domain is ``""``, ``ai.onnx`` too).
+
+    Read from the protobuf wire format by hand: the gripper PC has no ``onnx``
+    package and onnxruntime does not expose a model's opsets. ``ModelProto`` field
+    8 is ``opset_import``; ``OperatorSetIdProto`` holds ``domain`` (1) and
+    ``version`` (2).
+
+    Raises
+    ------
+    ValueError
+        The bytes are not a well-formed protobuf message.
+    """
+    opsets: dict[str, int] = {}
+    for number, value in _proto_fields(model):
+        if number != 8 or not isinstance(value, bytes):
+            continue
+        domain, version = "", 0
+        for sub, item in _proto_fields(value):
+            if sub == 1 and isinstance(item, bytes):
+                domain = item.decode("utf-8", "replace")
+            elif sub == 2 and isinstance(item, int):
+                version = item
+        domain = "" if domain == "ai.onnx" else domain
+        opsets[domain] = max(opsets.get(domain, 0), version)
+    return opsets
+
+
+def _check_opset(
+    manifest: Manifest, model: bytes, model_file: str, manifest_file: str
+) -> None:
+    """The manifest's ``opset`` is the graph's default-domain ``opset_import``."""
+    top = Fields(manifest_file, manifest.raw)
+    try:
+        graph = onnx_opsets(model).get("")
+    except ValueError as exc:
+        raise BundleError(
+            model_file,
+            None,
+            f"its opset_import cannot be read: {exc}",
+        ) from None
+    if graph != manifest.opset:
+        raise top.error(
+            "opset",
+            f"is {manifest.opset} but {MODEL_FILE} imports "
+            + (
+                "no default-domain opset"
+                if graph is None
+                else f"default-domain opset {graph}"
+            )
+            + " (opset_import); re-export the bundle",
+        )
+
+
 def _check_graph(
     manifest: Manifest,
     session: ort.InferenceSession,
@@ -1140,8 +1317,9 @@ def _check_decision_size(
         )
 
 
-def _read_manifest(manifest_path: Path) -> Any:
-    """The decoded manifest.json: size-capped, strict JSON (no NaN), depth-capped."""
+def _read_manifest(manifest_path: Path) -> tuple[Any, bytes]:
+    """The decoded manifest.json and its bytes: size-capped, strict JSON (no NaN),
+    depth-capped."""
     mfile = str(manifest_path)
     try:
         size = manifest_path.stat().st_size
@@ -1172,7 +1350,7 @@ def _read_manifest(manifest_path: Path) -> Any:
         raise BundleError(
             mfile, None, f"is nested {depth} levels deep; at most {MAX_JSON_DEPTH}"
         )
-    return obj
+    return obj, data
 
 
 def _check_digest(obj: Any, mfile: str) -> None:
@@ -1201,6 +1379,7 @@ def load_bundle(
     *,
     session: SessionSpec | None = None,
     deadline_s: float = DEFAULT_DEADLINE_S,
+    key: bytes | None = None,
 ) -> Bundle:
     """Load and check a bundle folder, then build its onnxruntime session.
 
@@ -1223,6 +1402,11 @@ def load_bundle(
         Session options to use instead of the manifest's (for tuning).
     deadline_s : float
         Seconds the graph's first call may take (default 5; in (0, 3600]).
+    key : bytes, optional
+        The lab's signing key (:func:`read_key`): the bundle must then hold
+        ``manifest.hmac``, the HMAC-SHA256 of ``manifest.json``'s bytes under it,
+        checked before anything else in the manifest is read. Without a key
+        ``manifest.hmac`` is not read.
 
     Returns
     -------
@@ -1251,7 +1435,9 @@ def load_bundle(
             None,
             f"load deadline must be in (0, {MAX_DEADLINE_S:g}] s; got {deadline_s!r}",
         )
-    obj = _read_manifest(manifest_path)
+    obj, manifest_bytes = _read_manifest(manifest_path)
+    if key is not None:
+        _check_hmac(root, manifest_bytes, key)
     _check_digest(obj, mfile)
     manifest = validate_manifest(obj, mfile)
     model = prepare_model = b""
@@ -1292,6 +1478,7 @@ def load_bundle(
     spec = manifest.session if session is None else session
     model_file = str(root / MODEL_FILE)
     sess = _session(model, spec, model_file)
+    _check_opset(manifest, model, model_file, mfile)
     _check_graph(manifest, sess, model_file, mfile)
     window_shape = (manifest.frame.window, *manifest.frame.shape)
     pipeline = Pipeline(manifest.preprocessing, window_shape, mfile)
@@ -1364,6 +1551,7 @@ def _check_prepare(
             f"{list(want.shape)} (the loop feeds both graphs the same window)",
         )
     tensor = manifest.prepare
+    assert tensor is not None  # only called for a bundle with a prepare graph
     outs = {o.name: o for o in prep.get_outputs()}
     if tensor not in outs:
         raise BundleError(
@@ -1438,6 +1626,7 @@ def write_bundle(
     replay: tuple[np.ndarray, np.ndarray] | None = None,
     overwrite: bool = False,
     prepare: bytes | None = None,
+    key: bytes | None = None,
 ) -> Path:
     """Write a bundle atomically: a temporary sibling folder, checked, then renamed.
 
@@ -1461,6 +1650,9 @@ def write_bundle(
         under out is refused, as is an out inside a slipkit folder).
     prepare : bytes, optional
         The prepare graph (``prepare.onnx``; the manifest then has ``prepare``).
+    key : bytes, optional
+        Sign the bundle: ``manifest.hmac`` holds :func:`manifest_hmac` of the
+        written ``manifest.json`` under this key.
 
     Returns
     -------
@@ -1517,5 +1709,9 @@ def write_bundle(
         man = sign_manifest(man)
         text = json.dumps(man, indent=2) + "\n"
         (tmp / MANIFEST_FILE).write_text(text, encoding="utf-8")
-        load_bundle(tmp)  # the graph, its IO and the preprocessing, before the rename
+        if key is not None:
+            data = (tmp / MANIFEST_FILE).read_bytes()
+            (tmp / SIGNATURE_FILE).write_text(manifest_hmac(data, key) + "\n")
+        # the graph, its IO, the preprocessing and the signature, before the rename
+        load_bundle(tmp, key=key)
     return target

@@ -7,6 +7,7 @@ Usage::
     slipkit-run exports/tactip_svm --udp 127.0.0.1:9000 --frames 1000
     slipkit-run exports/tactip_svm --udp 127.0.0.1:9000 --wait 0 --timeout 5
     slipkit-run exports/tactip_svm --choose-session      # measure session options
+    slipkit-run exports/tactip_svm --key ~/lab.key       # refuse an unsigned or edited bundle
     slipkit-run exports/sliptack --cpus 1 --realtime     # affinity, SCHED_FIFO, GC, threads
     slipkit-run exports/tactip_svm --udp 0.0.0.0:9000 --send 192.168.1.20:9100 --jsonl
     slipkit-run exports/tactip_svm --lsl TacTip --lsl-out SlipDecisions
@@ -42,6 +43,7 @@ from slipkit.runtime.bundle import (
     MAX_DEADLINE_S,
     Bundle,
     load_bundle,
+    read_key,
 )
 from slipkit.runtime.errors import FrameError, OptionError
 from slipkit.runtime.hand import (
@@ -217,6 +219,14 @@ def _parser() -> argparse.ArgumentParser:
         metavar="S",
         help="seconds the graph's first call may take when the bundle loads "
         f"(default {DEFAULT_DEADLINE_S:g}; at most {MAX_DEADLINE_S:g})",
+    )
+    p.add_argument(
+        "--key",
+        type=Path,
+        metavar="FILE",
+        help="the lab's signing key (any bytes, kept outside the bundle): refuse a "
+        "bundle whose manifest.hmac is missing or is not the HMAC-SHA256 of its "
+        "manifest.json under this key (docs/deploy.md, Signed bundles)",
     )
     p.add_argument(
         "--send",
@@ -472,12 +482,20 @@ def _check_args(args: argparse.Namespace) -> None:
         )
     if args.udp is not None:
         _address(args.udp)
-    if args.send is not None and _address(args.send, "--send")[1] == 0:
-        raise OptionError("--send", f"port must be in [1, 65535]; got {args.send!r}")
+    if args.send is not None:
+        parse_address(args.send, "--send", min_port=1)
     if args.json is not None:
         # Before any work: never an input, a user's own file, a FIFO or device, nor
         # a dataset's, run's or bundle's own files.
         check_out_file(args.json, **_json_out(args))
+    args.key_bytes = None
+    if args.key is not None:
+        bundles: tuple[Path, ...] = (
+            tuple(parse_stream(s).bundle for s in args.stream)
+            if args.stream
+            else (Path(str(args.bundle)),)
+        )
+        args.key_bytes = read_key(args.key, "--key", bundles=bundles)
 
 
 def _replay(bundle: Bundle, path: Path | None) -> tuple[Any, Any, str]:
@@ -583,7 +601,7 @@ def run(argv: Sequence[str] | None = None) -> int:
             out, status = run_hand_cli(args, rt_opts)
         return _finish(args, out, status)
     rt_opts = _realtime_options(args)
-    bundle = load_bundle(args.bundle, deadline_s=args.load_deadline)
+    bundle = load_bundle(args.bundle, deadline_s=args.load_deadline, key=args.key_bytes)
     if rt_opts.pin_threads:
         bundle = bundle.with_session(pinned_session(bundle.session_spec, rt_opts))
     if args.choose_session:

@@ -119,6 +119,8 @@ LSL_POLL_S = 0.0005
 MAX_SPIN_US = 100_000.0
 _NAME = re.compile(r"[A-Za-z0-9_.-]{1,64}")
 _SOURCE = re.compile(r"@(replay|udp|lsl):")
+#: What looks like a source marker of any kind (``@bogus:``).
+_ANY_SOURCE = re.compile(r"@([A-Za-z][A-Za-z0-9_-]*):")
 
 
 @dataclass(frozen=True)
@@ -168,6 +170,14 @@ def parse_stream(text: str, option: str = "--stream") -> StreamBinding:
             f"stream name {name!r} must be 1-64 letters, digits, '_', '-' or '.'",
         )
     m = _SOURCE.search(rest)
+    other = _ANY_SOURCE.search(rest) if m is None else None
+    if other is not None and not Path(rest).is_dir():
+        raise OptionError(
+            option,
+            f"{name}: unknown source kind {other.group(1)!r} in "
+            f"'@{other.group(1)}:'; one of @replay:FILE, @udp:HOST:PORT, "
+            f"@lsl:STREAM; got {text!r}",
+        )
     if m is None:
         bundle, kind, target = rest, "replay", None
     else:
@@ -715,6 +725,7 @@ def build_streams(
                 bundle = load_bundle(
                     b.bundle,
                     deadline_s=getattr(args, "load_deadline", DEFAULT_DEADLINE_S),
+                    key=getattr(args, "key_bytes", None),  # slipkit-run --key
                 )
                 if rt_opts is not None and rt_opts.pin_threads:
                     bundle = bundle.with_session(

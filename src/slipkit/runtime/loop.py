@@ -47,7 +47,8 @@ record, and the debounce run restarts (slip is declared only on ``k`` consecutiv
 periods after the previous one (dropped frames), is not a bad frame: it is counted,
 and its windows are scored as the offline features score windows across dropped
 frames (frame by frame), unless ``skip_gaps=True`` skips the windows holding frames
-from both sides of it. Jitter (any dt in ``(0, max_gap_periods / rate_hz]``) is
+from both sides of it, or the bundle has stream state (below), where a gap starts a
+new recording. Jitter (any dt in ``(0, max_gap_periods / rate_hz]``) is
 accepted. Time is compared with the previous frame's finite timestamp, so one
 glitched timestamp flags at most one frame (and counts at most one gap), and a
 clock that restarts flags a single frame. A window whose graph input (float32, after
@@ -79,6 +80,20 @@ input or score was not finite, and :meth:`StreamLoop.reset`: the first window sc
 after any of these starts from a fresh state, as if a new recording began there.
 Each such event is counted (``state_resets``). A stateful bundle never takes the
 hop-1 fast path (``_step_hop1``): :meth:`StreamLoop.step` handles the state.
+
+Stream state
+------------
+A bundle with a recurrent ``state`` or a preprocessing op whose output depends on
+frames before the window (``stream_state`` in :mod:`slipkit.runtime.preprocessing`:
+``baseline_first``, ``press_sign``) reads a gap as the start of a new recording, as
+the batch model reads each recording from its own start: the frame after the gap is
+the new stream's first frame. Those ops are reset there, the state is zeroed, and the
+window refills from that frame: windows holding frames from both sides are not
+scored, and the hop grid restarts, so the first decision is on the new stream's
+``window``-th frame and the next ones every ``hop`` frames, as at the start of the
+loop. A flagged frame or a non-finite window does not reset the ops (the batch
+models skip a missing sample within a recording). The work happens on the gap path
+only; a frame in step pays nothing for it.
 
 Prepared decisions
 ------------------
@@ -405,6 +420,9 @@ class StreamLoop:
         # Row views made once: indexing the ring per frame costs a view each time.
         self._rows = list(self._ring)
         self._ops = list(bundle.preprocessing.ops)
+        # Stream state (module docstring): the ops reset on a gap, and whether a gap
+        # restarts the stream (set below, once the recurrent state is known).
+        self._stream_ops = list(bundle.preprocessing.stream_state)
         (inp,) = m.inputs
         assert inp.dtype is not None
         self._input = np.zeros(inp.static_shape, dtype=np.dtype(inp.dtype))
@@ -419,6 +437,7 @@ class StreamLoop:
         # Recurrent state (module docstring): h_in buffers fed to the graph, h_out
         # buffers the graph writes, copied into h_in after each scored window.
         self._state = m.state
+        self._restart_on_gap = bool(self._stream_ops or self._state)
         self._h_in = [np.zeros(s.shape, dtype=np.dtype(s.dtype)) for s in m.state]
         self._h_out = [np.zeros_like(h) for h in self._h_in]
         self._h_pairs = tuple(zip(self._h_in, self._h_out, strict=True))
@@ -531,6 +550,10 @@ class StreamLoop:
         self._run = 0
         self._n = 0
         self._prev_ts = math.nan
+        # 1-based count of the frame that completes the current stream's first
+        # window: the window until a gap restarts the stream (*Stream state*); the
+        # hop grid runs from it.
+        self._first = self._w
         # _step_hop1's ops all keep non-finite values (re-tested until a stateful
         # op such as baseline_first is complete).
         self._folded = False
@@ -704,7 +727,8 @@ class StreamLoop:
         if p == w:
             p = 0
         self._pos = p
-        if seen < w or (seen - w) % self._hop:
+        first = self._first
+        if seen < first or (seen - first) % self._hop:
             return None
         if seen < self._clean_from:
             self._skipped += 1
@@ -956,11 +980,23 @@ class StreamLoop:
             return bad or "time_order"
         self._gaps += 1
         self._zero_state()
-        if self._skip_gaps:
+        if self._restart_on_gap:
+            self._restart(seen)
+        elif self._skip_gaps:
             # Windows holding the frames on both sides of the gap: the ones ending
             # here and at the next window - 2 frames.
             self._clean_from = max(self._clean_from, seen + self._w - 1)
         return bad
+
+    def _restart(self, seen: int) -> None:
+        """A gap in a bundle with stream state: frame ``seen`` (1-based) starts a new
+        recording (module docstring, *Stream state*)."""
+        for op in self._stream_ops:
+            op.reset()  # type: ignore[attr-defined]
+        self._first = seen - 1 + self._w
+        # _step_hop1 hands the windows before it to step, which does not score them
+        self._clean_from = max(self._clean_from, self._first)
+        self._folded = False  # an op's keeps_nonfinite may be False again
 
     def _skip_nonfinite(self) -> None:
         self._skipped += 1

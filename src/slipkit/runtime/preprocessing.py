@@ -90,6 +90,18 @@ class Op(Protocol):
     :class:`~slipkit.runtime.loop.StreamLoop` then tests the graph input alone for
     one-frame windows (the frame is tested only when that finds a NaN or
     infinity). Ops without it are never run on a frame before it is tested.
+
+    Reset contract. An op that keeps anything between calls has ``reset()``, which
+    forgets it (a new stream starts with the next call, whose window holds the
+    stream's first frames). It also sets ``stream_state``: True when its output
+    depends on frames before the window (``baseline_first``, ``press_sign``: a
+    level latched at the stream's start), False when the state is only a cache of
+    a function of the window (``sliding_spectrum``). A bundle with a
+    ``stream_state`` op treats a gap as a new recording:
+    :class:`~slipkit.runtime.loop.StreamLoop` resets those ops there and restarts
+    the window at the frame after the gap, as it zeros a recurrent state (its
+    module docstring, *Stream state*). Every op's ``reset()`` runs on
+    :meth:`Pipeline.reset` and :meth:`~slipkit.runtime.loop.StreamLoop.reset`.
     """
 
     out_shape: tuple[int, ...]
@@ -321,6 +333,9 @@ class _BaselineFirst:
     stream can differ).
     """
 
+    #: the baseline is latched from the stream's first frames (see :class:`Op`)
+    stream_state = True
+
     def __init__(self, n: int, hop: int, in_shape: tuple[int, ...]) -> None:
         self.n = n
         self.hop = hop
@@ -392,6 +407,10 @@ class Pipeline:
         The compiled steps, in order.
     out_shape : tuple of int
         Shape of the last step's output (``window_shape`` when there are no steps).
+    stateful : list of Op
+        The steps with ``reset()`` (see :class:`Op`, *Reset contract*).
+    stream_state : list of Op
+        Of those, the steps whose output depends on frames before the window.
     """
 
     def __init__(
@@ -410,6 +429,15 @@ class Pipeline:
             shape = op.out_shape
             self.ops.append(op)
         self.out_shape = shape
+        self.stateful: list[Op] = [op for op in self.ops if hasattr(op, "reset")]
+        self.stream_state: list[Op] = [
+            op for op in self.stateful if getattr(op, "stream_state", False)
+        ]
+
+    def reset(self) -> None:
+        """Forget every step's state: the next window starts a new stream."""
+        for op in self.stateful:
+            op.reset()  # type: ignore[attr-defined]
 
     def __call__(self, window: Array) -> Array:
         """Run every step on one window (oldest frame first)."""
@@ -647,6 +675,9 @@ class _PressSign:
     both are known (and while ``rest`` is NaN: no finite rest frame) the output is
     zeros (untouched: the graph's touch gate scores it NO_SCORE).
     """
+
+    #: rest and sign are latched from the stream's first frames (see :class:`Op`)
+    stream_state = True
 
     def __init__(
         self,

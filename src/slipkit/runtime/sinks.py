@@ -130,19 +130,22 @@ def unpack_decision(data: bytes, where: str = "datagram") -> Decision:
     return Decision(frame, ts, score, klass, bool(slip), bool(decl), lat, stream)
 
 
-def parse_address(text: str, option: str) -> tuple[str, int]:
-    """``HOST:PORT`` -> (host, port); :class:`OptionError` naming ``option`` otherwise."""
+def parse_address(text: str, option: str, min_port: int = 0) -> tuple[str, int]:
+    """``HOST:PORT`` -> (host, port); :class:`OptionError` naming ``option`` otherwise.
+
+    A value that is not ``HOST:PORT`` and a port outside ``[min_port, 65535]`` (0:
+    any free port, where a listener may take one) get their own messages.
+    """
     host, sep, port = text.rpartition(":")
-    if (
-        not sep
-        or not host
-        or not port.isascii()
-        or not port.isdigit()
-        or len(port) > 5
-        or int(port) > 65535
-    ):
+    if not sep or not host or not port.isascii() or not port.isdigit():
         raise OptionError(
             option, f"must be HOST:PORT (e.g. 127.0.0.1:9000); got {text!r}"
+        )
+    if len(port) > 5 or not min_port <= int(port) <= 65535:
+        raise OptionError(
+            option,
+            f"port {port[:12]}{'...' if len(port) > 12 else ''} is out of range: "
+            f"a port is in [{min_port}, 65535]; got {text[:80]!r}",
         )
     return host, int(port)
 

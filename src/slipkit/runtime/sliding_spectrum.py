@@ -92,6 +92,9 @@ def range_bounds(w: int, s: int) -> list[int]:
 class SlidingSpectrum:
     """Window ``(W, 1)`` -> power spectrum ``(1, nfft // 2 + 1)``, updated per hop (module docstring)."""
 
+    #: the state is a cache of a function of the window (preprocessing.Op)
+    stream_state = False
+
     def __init__(self, w: int, s: int, hop: int, nfft: int) -> None:
         self.w, self.s, self.hop, self.nfft = w, s, hop, nfft
         nb = nfft // 2 + 1

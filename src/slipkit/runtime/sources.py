@@ -26,6 +26,12 @@ One frame per datagram, little-endian::
     24      4     uint32    n_values
     28      4*n   float32   values, C order of frame.shape (channel order of the manifest)
 
+The whole datagram is little-endian, the values included (``<f4``). The version
+field doubles as a byte-order mark: a datagram written big-endian (``struct`` format
+``">4sHHQdI"`` or ``"!..."``, a big-endian host's native order) reads version 256,
+and is rejected as big-endian by name. (Big-endian values behind a little-endian
+header cannot be told from other values: a sender writes both in one order.)
+
 A datagram that breaks the format, has the wrong ``n_values`` or an index not above the
 last one is skipped and counted in :attr:`UdpSource.n_rejected` (a live loop must not
 stop on one bad packet); the last reason is kept in :attr:`UdpSource.last_error`.
@@ -110,6 +116,23 @@ def encode_frame(index: int, timestamp: float, values: ArrayLike) -> bytes:
     )
 
 
+#: The version as a big-endian sender's header reads here (the byte-order mark).
+SWAPPED_VERSION = int.from_bytes(VERSION.to_bytes(2, "little"), "big")
+
+
+def _header_problem(magic: bytes, version: int, n_values: int, want: int) -> str:
+    """Why a header is refused (a big-endian one named as such)."""
+    if magic == MAGIC and version == SWAPPED_VERSION:
+        return (
+            f"big-endian datagram (version reads {version}, {VERSION} byte-swapped): "
+            "the frame format is little-endian, header and '<f4' values"
+        )
+    return (
+        f"header magic={magic!r} version={version} n_values={n_values}; expected "
+        f"{MAGIC!r}, {VERSION}, {want}"
+    )
+
+
 def decode_frame(
     data: bytes, where: str = "udp frame"
 ) -> tuple[int, float, NDArray[np.float32]]:
@@ -125,6 +148,8 @@ def decode_frame(
             where, f"{len(data)} bytes is shorter than the {HEADER_SIZE}-byte header"
         )
     magic, version, _flags, index, ts, n = HEADER.unpack_from(data)
+    if magic == MAGIC and version == SWAPPED_VERSION:
+        raise FrameError(where, _header_problem(magic, version, n, n))
     if magic != MAGIC:
         raise FrameError(where, f"magic is {magic!r}, expected {MAGIC!r}")
     if version != VERSION:
@@ -143,7 +168,8 @@ def check_replay_arrays(
     """Check recorded frames and timestamps against a frame shape.
 
     Returns ``frames`` as ``(n, *frame_shape)`` (float32 kept, other numbers as
-    float64) and ``timestamps`` as float64; :class:`FrameError` names the array.
+    float64) and ``timestamps`` as float64 (integer or float arrays only: strings
+    and booleans are refused, not converted); :class:`FrameError` names the array.
     """
     if frames.dtype.kind not in "fiu" or frames.ndim < 2 or len(frames) == 0:
         raise FrameError(
@@ -160,6 +186,12 @@ def check_replay_arrays(
         frames = frames.reshape(n, *frame_shape)
     if frames.dtype != np.float32:
         frames = frames.astype(np.float64)
+    if timestamps.dtype.kind not in "fiu":
+        # strings or booleans would convert silently; a replay stores numbers
+        raise FrameError(
+            where,
+            f"'timestamps' must be numbers (s); got dtype {timestamps.dtype}",
+        )
     times = np.asarray(timestamps, dtype=np.float64)
     if times.shape != (n,):
         raise FrameError(
@@ -542,9 +574,7 @@ class UdpSource(_Socket):
             return None
         magic, version, _flags, index, ts, nv = HEADER.unpack_from(self._buf)
         if magic != MAGIC or version != VERSION or nv != self.n_values:
-            self._reject(
-                f"header magic={magic!r} version={version} n_values={nv}; expected {MAGIC!r}, {VERSION}, {self.n_values}"
-            )
+            self._reject(_header_problem(magic, version, nv, self.n_values))
             return None
         last = self._last
         if index <= last:
