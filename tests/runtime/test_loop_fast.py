@@ -238,3 +238,42 @@ def test_a_gap_starts_a_new_recording_for_a_baseline_bundle(
     assert 1 == both.gaps
     assert (ref.frame + len(first)).tolist() == both.frame[after].tolist()
     np.testing.assert_allclose(ref.score, both.score[after], rtol=1e-6)
+
+
+def test_a_few_dropped_frames_keep_the_baseline_of_the_recording(
+    tmp_path: Path,
+) -> None:
+    """baseline_first across a gap shorter than restart_gap_periods (dropped frames of a
+    live stream): the baseline stays the recording's, so the scores after it equal the
+    stream's scores without the dropout; a long gap restarts the baseline."""
+    pre = [{"op": "baseline_first", "frames": 3, "hop": 1}]
+    path = _bundle(tmp_path, window=1, hop=1, preprocessing=pre)
+    rng = np.random.default_rng(4)
+    rows = rng.normal(size=(40, N_CH)) + np.linspace(0, 5, 40)[:, None]
+    t = np.arange(len(rows)) / RATE_HZ
+    full = StreamLoop(load_bundle(path))
+    for row, ts in zip(rows, t, strict=True):
+        full.step(row, float(ts))
+    ref = full.result()
+    keep = np.ones(len(rows), dtype=bool)
+    keep[20:22] = False  # two dropped frames: a gap of 3 periods
+    short = StreamLoop(load_bundle(path))
+    for row, ts in zip(rows[keep], t[keep], strict=True):
+        short.step(row, float(ts))
+    res = short.result()
+    assert 1 == res.gaps
+    np.testing.assert_allclose(ref.score[keep], res.score, rtol=1e-6)
+    restart = StreamLoop(load_bundle(path), restart_gap_periods=2.0)
+    for row, ts in zip(rows[keep], t[keep], strict=True):
+        restart.step(row, float(ts))
+    after = restart.result().frame >= 20
+    assert not np.allclose(
+        ref.score[keep][after], restart.result().score[after], rtol=1e-6
+    )
+
+
+def test_restart_gap_periods_below_max_gap_periods_is_refused(tmp_path: Path) -> None:
+    """A restart threshold under the gap threshold is refused, naming the parameter."""
+    path = _bundle(tmp_path, window=1, hop=1, preprocessing=BASELINE)
+    with pytest.raises(ValueError, match="restart_gap_periods"):
+        StreamLoop(load_bundle(path), restart_gap_periods=1.2)

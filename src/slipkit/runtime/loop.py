@@ -85,9 +85,12 @@ Stream state
 ------------
 A bundle with a recurrent ``state`` or a preprocessing op whose output depends on
 frames before the window (``stream_state`` in :mod:`slipkit.runtime.preprocessing`:
-``baseline_first``, ``press_sign``) reads a gap as the start of a new recording, as
-the batch model reads each recording from its own start: the frame after the gap is
-the new stream's first frame. Those ops are reset there, the state is zeroed, and the
+``baseline_first``, ``press_sign``) reads a long gap (more than
+``restart_gap_periods`` frame periods, default :data:`RESTART_GAP_PERIODS`) as the
+start of a new recording, as the batch model reads each recording from its own
+start: the frame after the gap is the new stream's first frame. A shorter gap (a few
+dropped frames of a live stream) is counted and zeroes a recurrent state but keeps
+the ops' rest level and wiring: the grasp goes on. Those ops are reset there, the state is zeroed, and the
 window refills from that frame: windows holding frames from both sides are not
 scored, and the hop grid restarts, so the first decision is on the new stream's
 ``window``-th frame and the next ones every ``hop`` frames, as at the start of the
@@ -134,6 +137,11 @@ from slipkit.runtime.sources import Frame
 # attribute load, twice per frame.
 _clock = time.perf_counter_ns
 _ndarray = np.ndarray
+
+#: Frame periods of silence after which a bundle with stream state starts a new
+#: recording (module docstring, *Stream state*): well above a few dropped frames of a
+#: live stream, below the ten periods a replay or a parity stream leaves between trials.
+RESTART_GAP_PERIODS = 5.0
 
 #: Streams whose NaN values are data ("not detected"), not faults: the TacTip pins.
 NAN_IS_MISSING_STREAMS = frozenset({"pins"})
@@ -353,6 +361,11 @@ class StreamLoop:
     skip_gaps : bool
         Also skip the windows that span a gap (default False: score them, as the
         offline features do).
+    restart_gap_periods : float
+        For a bundle with stream state (module docstring, *Stream state*): a gap of
+        more than this many frame periods starts a new recording (its ops reset);
+        a shorter one does not. Default :data:`RESTART_GAP_PERIODS`; at least
+        ``max_gap_periods``.
     nan_is_missing : bool, optional
         Let NaN values through (only infinities are flagged) because the bundle's
         preprocessing or graph reads NaN as "missing". Default: True when every
@@ -384,6 +397,7 @@ class StreamLoop:
         capacity: int = 1024,
         max_gap_periods: float = 1.5,
         skip_gaps: bool = False,
+        restart_gap_periods: float | None = None,
         nan_is_missing: bool | None = None,
         on_decision: Callable[[int, float, float, int, bool, bool, int], Any]
         | None = None,
@@ -392,9 +406,22 @@ class StreamLoop:
             raise ValueError(
                 f"max_gap_periods must be a number above 1 (frame periods); got {max_gap_periods!r}"
             )
+        restart = (
+            RESTART_GAP_PERIODS if restart_gap_periods is None else restart_gap_periods
+        )
+        if not (
+            isinstance(restart, int | float)
+            and math.isfinite(restart)
+            and restart >= max_gap_periods
+        ):
+            raise ValueError(
+                "restart_gap_periods must be a finite number of frame periods at least "
+                f"max_gap_periods ({max_gap_periods}); got {restart_gap_periods!r}"
+            )
         m = bundle.manifest
         self.bundle = bundle
         self.on_decision = on_decision
+        self._restart_dt = float(restart) / m.frame.rate_hz
         self._w = m.frame.window
         self._hop = m.frame.hop
         self._k = m.debounce_k
@@ -980,7 +1007,7 @@ class StreamLoop:
             return bad or "time_order"
         self._gaps += 1
         self._zero_state()
-        if self._restart_on_gap:
+        if self._restart_on_gap and dt > self._restart_dt:
             self._restart(seen)
         elif self._skip_gaps:
             # Windows holding the frames on both sides of the gap: the ones ending
