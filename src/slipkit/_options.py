@@ -17,6 +17,9 @@ table of small rules keeps the configs as they are and the messages one line.
 
 from __future__ import annotations
 
+import difflib
+import fnmatch
+import inspect
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -310,7 +313,122 @@ def check_options(cfg: DictConfig, command: str) -> None:
         check_dataset(cfg, "comparison.")
 
 
+#: Hydra's instantiation keys: a node with a ``_target_`` may be given any of them.
+_INSTANTIATE_KEYS = ("_target_", "_partial_", "_convert_", "_recursive_", "_args_")
+
+#: subcommand -> mappings (dotted, ``*`` matching one key) that take new names although
+#: their entries are plain values: the demo's ``scenario -> family`` style tables. A
+#: mapping of mappings or lists (estimators, detectors, runs, effects, search
+#: parameters) or an empty one (``task_overrides: {}``) takes new names anyway.
+OPEN_MAPPINGS: dict[str, tuple[str, ...]] = {
+    "demo": (
+        "real",
+        "real_comparisons",
+        "closedloop.families",
+        "closedloop.detector.*",
+    ),
+}
+
+
+def _target_params(node: DictConfig) -> set[str] | None:
+    """Keyword names ``node._target_`` takes; None: any (``**kwargs``) or not knowable here."""
+    from hydra.utils import get_object
+
+    try:
+        target = get_object(str(node._get_node("_target_")._value()))  # type: ignore[union-attr]
+        params = inspect.signature(target).parameters.values()
+    except Exception:  # a target that does not load: instantiation says why
+        return None
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
+        return None
+    return {
+        p.name
+        for p in params
+        if p.kind
+        in (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+    }
+
+
+def _effect_params(name: str) -> set[str] | None:
+    """Keyword names of the scene effect behind effect key ``name``; None if not an effect."""
+    from slipkit.sim.core import EFFECTS, _load_effect_modules, effect_name
+
+    _load_effect_modules()
+    effect = EFFECTS.get(effect_name(name))
+    if effect is None:
+        return None
+    params = list(inspect.signature(effect).parameters.values())[
+        2:
+    ]  # (state, rng, ...)
+    return {p.name for p in params}
+
+
+def _takes(node: DictConfig, where: str, command: str) -> tuple[set[str], bool]:
+    """(the keys ``node`` at dotted ``where`` takes, whether it takes any other key too)."""
+    keys = {str(k) for k in node}
+    if "_target_" in node:
+        params = _target_params(node)
+        return keys | (params or set()) | set(_INSTANTIATE_KEYS), params is None
+    parent, _, leaf = where.rpartition(".")
+    if parent == "effects" or parent.endswith(".effects"):
+        params = _effect_params(leaf)
+        if params is not None:
+            return keys | params, False
+    if any(fnmatch.fnmatchcase(where, p) for p in OPEN_MAPPINGS.get(command, ())):
+        return keys, True
+    raw = OmegaConf.to_container(node, resolve=False)
+    values = list(raw.values()) if isinstance(raw, dict) else []
+    named = [v for v in values if v is not None]
+    # {} or a mapping of named entries (each a mapping or a list): a new name is an entry.
+    return keys, all(isinstance(v, dict | list) for v in named)
+
+
+def _closest(word: str, candidates: list[str]) -> list[str]:
+    """The candidates closest to ``word`` (difflib's ratio >= 0.6, within 0.1 of the best)."""
+    close = difflib.get_close_matches(word, candidates, n=3, cutoff=0.6)
+    scores = [difflib.SequenceMatcher(None, word, c).ratio() for c in close]
+    return [c for c, r in zip(close, scores, strict=True) if r >= max(scores) - 0.1]
+
+
+def unknown_key(cfg: DictConfig, key: str, command: str = "") -> str | None:
+    """Why dotted ``key`` is not an option of ``cfg`` (one line, closest keys suggested); None if it is.
+
+    A key is an option when ``cfg`` has it, when its node has a ``_target_`` whose
+    callable takes it (or any keyword), when its node is a scene effect taking it,
+    or when its node is a mapping of named entries (``estimators``, ``detectors``,
+    ``search.params``, an empty ``{}``; :data:`OPEN_MAPPINGS`).
+    """
+    parts = key.split(".")
+    node: Any = cfg
+    for i, part in enumerate(parts):
+        where = ".".join(parts[:i])
+        here = where or "the config"
+        if not isinstance(node, DictConfig):
+            return f"{key}: unknown key; {here} is one value, not a group of options"
+        keys, any_key = _takes(node, where, command)
+        if part not in node:
+            if any_key or part in keys:
+                return None
+            prefix = f"{where}." if where else ""
+            shown = sorted(k for k in keys if not k.startswith("_"))
+            close = _closest(part, shown)
+            if close:
+                hint = "did you mean " + " or ".join(prefix + c for c in close) + "?"
+            else:
+                more = ", ..." if len(shown) > 12 else ""
+                hint = f"{here} has {', '.join(shown[:12])}{more}"
+            return f"{key}: unknown key; {hint}"
+        try:
+            node = node._get_node(part)
+        except OmegaConfBaseException:
+            return None
+        if not isinstance(node, DictConfig) or node._is_none():
+            node = None
+    return None
+
+
 __all__ = [
+    "OPEN_MAPPINGS",
     "OPTIONS",
     "Rule",
     "check_dataset",
@@ -318,4 +436,5 @@ __all__ = [
     "check_rules",
     "check_value",
     "show",
+    "unknown_key",
 ]

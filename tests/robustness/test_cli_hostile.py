@@ -100,7 +100,7 @@ MALFORMED: list[tuple[list[str], str]] = [
     (["simulate", "scene=nope"], "Could not find 'scene/nope'; available: "),
     (
         ["simulate", "scene=davis_release", "scene.model.rate_hz=1"],
-        "Could not override 'scene.model.rate_hz'; To append",
+        "scene.model.rate_hz: unknown key; did you mean scene.model.truth_rate_hz?",
     ),
     # import
     (["import", "out={tmp}/o"], "path=...: missing; this option is required"),
@@ -175,7 +175,7 @@ MALFORMED: list[tuple[list[str], str]] = [
     (["train", "overwrite=1"], "overwrite=1: expected true or false"),
     (
         ["train", "dataset.n_trials=2", "+model.bogus=1", "run_dir={tmp}/run"],
-        "unexpected keyword argument 'bogus'",
+        "model.bogus: unknown key; model has C, class_weight, features, gamma,",
     ),
     (
         ["train", "model.C=abc", "run_dir={tmp}/run"],
