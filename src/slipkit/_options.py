@@ -108,6 +108,37 @@ def number(*, minimum: float | None = None, positive: bool = False) -> Rule:
     return Rule("a finite number", _is_number)
 
 
+def within(
+    lo: float,
+    hi: float,
+    unit: str = "",
+    *,
+    above: bool = False,
+    whole_number: bool = False,
+    span: bool = False,
+) -> Rule:
+    """A number in ``[lo, hi]`` (``(lo, hi]`` when ``above``; a whole number when
+    ``whole_number``); with ``span`` also ``[a, b]``, ``a <= b`` both in range (drawn per trial).
+
+    The declared range of a physical parameter: a bound keeps a typo or an extreme
+    (``hold_s=1e9``, ``substeps=1e9``) from running for hours or asking for terabytes.
+    """
+    one = _is_whole if whole_number else _is_number
+
+    def inside(v: Any) -> bool:
+        return one(v) and (lo < v if above else lo <= v) and v <= hi
+
+    def accept(v: Any) -> bool:
+        if span and isinstance(v, ListConfig | list | tuple):
+            return len(v) == 2 and inside(v[0]) and inside(v[1]) and v[0] <= v[1]
+        return inside(v)
+
+    kind = "a whole number" if whole_number else "a number"
+    where = f"{'(' if above else '['}{lo:g}, {hi:g}]" + (f" {unit}" if unit else "")
+    text = f"{kind} or [lo, hi] within {where}" if span else f"{kind} in {where}"
+    return Rule(text, accept)
+
+
 FLAG = Rule("true or false", lambda v: isinstance(v, bool))
 SEED = whole(0, MAX_SEED)
 COUNT = whole(1)
@@ -437,4 +468,5 @@ __all__ = [
     "check_value",
     "show",
     "unknown_key",
+    "within",
 ]

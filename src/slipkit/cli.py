@@ -65,6 +65,35 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+#: subcommand -> {option: config group}: ``option=X`` picks the group's option ``X`` when
+#: ``configs/<group>/X.yaml`` exists, so dotted overrides of the group apply to ``X``
+#: (``slipkit closedloop scenario=fsr closedloop.plant.latency_s=0.05``).
+GROUP_OPTIONS: dict[str, dict[str, str]] = {"closedloop": {"scenario": "closedloop"}}
+
+
+def _pick_groups(sub: str, rest: Sequence[str]) -> list[str]:
+    """``rest`` with each ``option=X`` of :data:`GROUP_OPTIONS` written as ``<group>=X``.
+
+    Left as it is when an ``X`` (or one of a ``-m`` sweep's ``X,Y``) has no config
+    file: the command refuses it, naming the option and the ones there are.
+    """
+    from slipkit import config_dir
+
+    out = []
+    for arg in rest:
+        key, eq, value = arg.partition("=")
+        group = GROUP_OPTIONS.get(sub, {}).get(key)
+        names = value.split(",")
+        if (
+            eq
+            and group
+            and all((config_dir() / group / f"{n}.yaml").is_file() for n in names)
+        ):
+            arg = f"{group}={value}"
+        out.append(arg)
+    return out
+
+
 def _usage() -> str:
     width = max(map(len, SUBCOMMANDS))
     rows = "\n".join(
@@ -434,6 +463,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         except Exception as exc:
             _internal_error(sub, exc, rest)
 
+    rest = _pick_groups(sub, rest)
     overrides = _check_flags(sub, rest)
     run.__name__ = sub.replace("-", "_")
     run.__module__ = __name__

@@ -1,0 +1,234 @@
+"""Unbounded values are refused in one line naming them, before any work.
+
+Closed-loop plant and scenario parameters have declared ranges (a typo such as
+``substeps=1000000000`` or ``hold_s=1e9`` would hang or ask for terabytes),
+``scenario=X`` takes dotted overrides as ``closedloop=X`` does.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+from omegaconf import OmegaConf
+
+from slipkit.cli import main
+from slipkit.closedloop import biotac, fsr, sliptack, tactip
+from slipkit.errors import SlipkitError
+
+
+@pytest.fixture(autouse=True)
+def _sandbox(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Relative outputs and internal-error logs land under tmp_path only."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("SLIPKIT_LOG_DIR", str(tmp_path / "logs"))
+    monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
+
+
+def cli(
+    args: list[str], capsys: pytest.CaptureFixture[str]
+) -> tuple[Any, str, list[str]]:
+    """(exit status, stdout, non-blank stderr lines) of ``slipkit <args>``."""
+    capsys.readouterr()
+    try:
+        main(args)
+        code: Any = 0
+    except SystemExit as exc:
+        code = exc.code
+    out, err = capsys.readouterr()
+    return code, out, [line for line in err.splitlines() if line.strip()]
+
+
+def plant_of(family: str) -> dict[str, Any]:
+    from slipkit import config_dir
+
+    node = OmegaConf.load(config_dir() / "closedloop" / f"{family}.yaml")
+    plant = OmegaConf.to_container(node.plant)
+    assert isinstance(plant, dict)
+    return {str(k): v for k, v in plant.items()}
+
+
+CHECKS = {
+    "fsr": fsr.check_plant,
+    "biotac": biotac.check_plant,
+    "tactip": tactip.check_scenario,
+    "sliptack": sliptack.check_plant,
+}
+
+
+@pytest.mark.parametrize("family", sorted(CHECKS))
+def test_the_shipped_plants_are_within_their_ranges(family: str) -> None:
+    """Every configs/closedloop/<family>.yaml plant passes its family's declared ranges."""
+    assert CHECKS[family](plant_of(family)) is None
+
+
+@pytest.mark.parametrize(
+    ("family", "key", "value", "message"),
+    [
+        (
+            "fsr",
+            "substeps",
+            1_000_000_000,
+            "closedloop.plant.substeps=1000000000: expected a whole number in [1, 64]",
+        ),
+        (
+            "fsr",
+            "hold_s",
+            1e9,
+            "closedloop.plant.hold_s=1000000000.0: expected a number in [0, 10] s",
+        ),
+        (
+            "fsr",
+            "contacts",
+            0,
+            "closedloop.plant.contacts=0: expected a whole number in [1, 5]",
+        ),
+        (
+            "fsr",
+            "latency_s",
+            1e300,
+            "closedloop.plant.latency_s=1e+300: expected a number in [0, 0.5] s",
+        ),
+        (
+            "fsr",
+            "latency_s",
+            -1,
+            "closedloop.plant.latency_s=-1: expected a number in [0, 0.5] s",
+        ),
+        (
+            "fsr",
+            "mass_kg",
+            [0.4, 0.2],
+            "closedloop.plant.mass_kg=[0.4, 0.2]: expected a number or [lo, hi] within (0, 20] kg",
+        ),
+        (
+            "biotac",
+            "hold_s",
+            1e9,
+            "closedloop.plant.hold_s=1000000000.0: expected a number in [0, 10] s",
+        ),
+        (
+            "biotac",
+            "control_hz",
+            0,
+            "closedloop.plant.control_hz=0: expected a number in (0, 10000] Hz",
+        ),
+        (
+            "tactip",
+            "latency_s",
+            1e300,
+            "closedloop.plant.latency_s=1e+300: expected a number in [0, 0.5] s",
+        ),
+        (
+            "tactip",
+            "substeps",
+            10**9,
+            "closedloop.plant.substeps=1000000000: expected a whole number in [1, 64]",
+        ),
+        (
+            "sliptack",
+            "substeps",
+            10**9,
+            "closedloop.plant.substeps=1000000000: expected a whole number in [1, 64]",
+        ),
+        (
+            "sliptack",
+            "post_s",
+            1e9,
+            "closedloop.plant.post_s=1000000000.0: expected a number in (0, 10] s",
+        ),
+    ],
+)
+def test_a_plant_parameter_out_of_range_is_refused(
+    family: str, key: str, value: Any, message: str
+) -> None:
+    """A plant parameter outside its declared range is one SlipkitError naming it and the range."""
+    with pytest.raises(SlipkitError) as refused:
+        CHECKS[family]({**plant_of(family), key: value})
+    assert message == str(refused.value)
+
+
+@pytest.mark.parametrize(
+    ("scenario", "grid", "node", "message"),
+    [
+        (
+            fsr.FSRScenario,
+            "conditions",
+            {"lo": 0.25, "hi": 1.0, "n": 10**9},
+            "closedloop.conditions.n=1000000000: expected a whole number in [1, 100]",
+        ),
+        (
+            biotac.BioTacScenario,
+            "conditions",
+            {"lo": 0.0, "hi": 1.0, "n": 3},
+            "closedloop.conditions.lo=0.0: expected a number in (0, 10] s",
+        ),
+        (
+            tactip.TacTipScenario,
+            "speeds",
+            {"lo": 20.0, "hi": 0.1, "n": 3},
+            "closedloop.speeds.lo=20: expected <= closedloop.speeds.hi (0.1)",
+        ),
+        (
+            sliptack.SlipTackScenario,
+            "pull_speeds",
+            {"lo": 10.0, "hi": 1e9, "n": 3},
+            "closedloop.pull_speeds.hi=1000000000.0: expected a number in (0, 1000] mm/s",
+        ),
+    ],
+)
+def test_a_conditions_grid_out_of_range_is_refused(
+    scenario: Any, grid: str, node: dict[str, Any], message: str
+) -> None:
+    """A conditions grid with too many points or a value out of range is one SlipkitError naming it."""
+    with pytest.raises(SlipkitError) as refused:
+        scenario().conditions(OmegaConf.create({grid: node, "drop": True}))
+    assert message == str(refused.value)
+
+
+def test_scenario_takes_the_dotted_overrides_of_its_own_file(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """scenario=fsr applies closedloop.* overrides to fsr.yaml, keys only fsr.yaml has included."""
+    code, out, err = cli(
+        [
+            "closedloop",
+            "scenario=fsr",
+            "closedloop.plant.latency_s=0.05",
+            "closedloop.plant.load_factor=[1.6,2.0]",
+            "--cfg",
+            "job",
+        ],
+        capsys,
+    )
+    plant = OmegaConf.create(out).closedloop
+    assert (0, [], "fsr", 0.05, [1.6, 2.0]) == (
+        code,
+        err,
+        plant.name,
+        plant.plant.latency_s,
+        list(plant.plant.load_factor),
+    )
+
+
+def test_scenario_with_a_bad_dotted_override_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """scenario=fsr closedloop.plant.latency_s=-1 is one line naming it, exit 2, nothing written."""
+    code, _, err = cli(
+        [
+            "closedloop",
+            "scenario=fsr",
+            "closedloop.plant.latency_s=-1",
+            f"out={tmp_path / 'cl'}",
+        ],
+        capsys,
+    )
+    assert (
+        2,
+        [
+            "slipkit closedloop: error: closedloop.plant.latency_s=-1: expected a number in [0, 0.5] s"
+        ],
+        False,
+    ) == (code, err, (tmp_path / "cl").exists())
