@@ -232,3 +232,16 @@ def test_scenario_with_a_bad_dotted_override_is_refused(
         ],
         False,
     ) == (code, err, (tmp_path / "cl").exists())
+
+
+def test_a_core_list_beyond_any_machine_is_refused() -> None:
+    """slipkit-run --cpus 0-999999999 is one OptionError naming --cpus, not a set of 1e9 cores."""
+    from slipkit.runtime.errors import OptionError
+    from slipkit.runtime.realtime import parse_cpus
+
+    with pytest.raises(OptionError) as refused:
+        parse_cpus("0-999999999")
+    assert (
+        "--cpus: core numbers must be below 4096; got '0-999999999'",
+        (0, 4095),
+    ) == (str(refused.value), parse_cpus("0,4095"))
