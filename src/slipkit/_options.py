@@ -164,6 +164,10 @@ NAME = Rule(
     ),
 )
 RATE = number(positive=True)
+#: a simulated sensor's sample rate: from 1 Hz (a trial of a few seconds still has
+#: samples) to 100 kHz (tactile sensors sample at tens of kHz at most, the shipped scenes
+#: at 30 Hz-2.2 kHz; a TacTip trial at 100 kHz already holds about 10^8 numbers)
+SCENE_RATE = within(1.0, 1e5, "Hz")
 SEEDS = Rule(
     f"a non-empty list of whole numbers in [0, {MAX_SEED}]",
     lambda v: (
@@ -304,12 +308,15 @@ def check_rules(cfg: DictConfig, rules: Mapping[str, Rule], prefix: str = "") ->
         check_value(full, value, rule)
 
 
-def check_rates(cfg: DictConfig, node_key: str, *, nullable: bool) -> None:
-    """Every ``*rate_hz`` option directly under ``node_key`` is a finite number > 0."""
+def check_rates(
+    cfg: DictConfig, node_key: str, *, nullable: bool, rule: Rule = RATE
+) -> None:
+    """Every ``*rate_hz`` option directly under ``node_key`` meets ``rule`` (default: a
+    finite number > 0)."""
     present, missing, node = _lookup(cfg, node_key)
     if not present or missing or not isinstance(node, DictConfig):
         return
-    rule = RATE.null() if nullable else RATE
+    rule = rule.null() if nullable else rule
     for key in map(str, node.keys()):
         if key.endswith("rate_hz"):
             check_rules(cfg, {f"{node_key}.{key}": rule})
@@ -328,14 +335,14 @@ def check_dataset(cfg: DictConfig, prefix: str = "") -> None:
         check_rates(cfg, f"{prefix}source", nullable=True)
     if not path and not raw:
         check_rules(cfg, {"dataset.n_trials": COUNT, "dataset.seed": SEED}, prefix)
-        check_rates(cfg, f"{prefix}scene.model", nullable=False)
+        check_rates(cfg, f"{prefix}scene.model", nullable=False, rule=SCENE_RATE)
 
 
 def check_options(cfg: DictConfig, command: str) -> None:
     """Check the options of ``slipkit <command>``; raise a SlipkitError naming the first bad one."""
     check_rules(cfg, OPTIONS.get(command, {}))
     if command == "simulate":
-        check_rates(cfg, "scene.model", nullable=False)
+        check_rates(cfg, "scene.model", nullable=False, rule=SCENE_RATE)
     elif command == "import":
         check_rates(cfg, "source", nullable=True)
     elif command == "train":

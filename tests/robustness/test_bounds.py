@@ -245,3 +245,39 @@ def test_a_core_list_beyond_any_machine_is_refused() -> None:
         "--cpus: core numbers must be below 4096; got '0-999999999'",
         (0, 4095),
     ) == (str(refused.value), parse_cpus("0,4095"))
+
+
+@pytest.mark.parametrize("rate", ["1e9", "1e-9"])
+def test_a_scene_rate_out_of_range_is_refused(
+    rate: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """slipkit simulate at 1e9 Hz or 1e-9 Hz is one line naming the rate and its range, exit 2."""
+    code, _, err = cli(
+        ["simulate", f"scene.model.rate_hz={rate}", f"out={tmp_path / 'd'}"], capsys
+    )
+    assert (
+        2,
+        [
+            f"slipkit simulate: error: scene.model.rate_hz={float(rate)}: expected a number "
+            "in [1, 100000] Hz"
+        ],
+        False,
+    ) == (code, err, (tmp_path / "d").exists())
+
+
+def test_a_scene_with_no_samples_is_refused() -> None:
+    """A scene whose rate and duration give no sample (direct API, 0.01 Hz) raises a SimulationError naming the stream."""
+    from hydra import compose, initialize_config_dir
+
+    from slipkit import config_dir
+    from slipkit.sim.commands import build_scene
+    from slipkit.sim.core import SimulationError
+
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        cfg = compose("simulate", ["scene=fsr_probe_slide", "scene.model.rate_hz=0.01"])
+    with pytest.raises(SimulationError) as refused:
+        build_scene(cfg.scene).simulate(2, 0)
+    assert (
+        "scene 'fsr_probe_slide': stream 'fsr' has no samples in any of the 2 trials "
+        "(is scene.model's rate or duration too small?)"
+    ) == str(refused.value)
