@@ -123,3 +123,36 @@ def test_a_true_false_channel_in_a_dataset_is_refused() -> None:
         "stream 's': column 'touch' holds true/false values (dtype bool); expected "
         "numbers (write 1/0 if it is a measured on/off signal)"
     ) == str(refused.value)
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        (
+            {"label_columns": "slip"},
+            "label_columns='slip': expected a list of column names",
+        ),
+        (
+            {"group_columns": None},
+            "group_columns=null: expected a list of column names",
+        ),
+        ({"channels": "a"}, "channels='a': expected a list of column names"),
+        (
+            {"trial_column": ["a"]},
+            r"trial_column=\['a'\]: expected a column name or null",
+        ),
+        ({"class_labels": "abc"}, "class_labels='abc': expected a mapping"),
+        ({"units": 5}, "units=5: expected one unit such as N"),
+        ({"sensor": None}, "sensor=null: expected a non-empty name"),
+        ({"glob": ""}, "glob='': expected a non-empty file pattern"),
+    ],
+)
+def test_an_argument_of_the_wrong_kind_is_named(
+    tmp_path: Path, options: dict[str, object], message: str
+) -> None:
+    """A text where a list belongs (read letter by letter before) or a null list is refused, naming it."""
+    path = tmp_path / "x.csv"
+    path.write_text("t,a,slip\n0,1,0\n0.1,2,0\n", encoding="utf-8")
+    kwargs: dict[str, object] = {"sensor": "generic", "time_column": "t", **options}
+    with pytest.raises(SourceFormatError, match=message):
+        read_csv_dataset(path, **kwargs)  # type: ignore[arg-type]

@@ -461,7 +461,22 @@ def read_csv_dataset(
         colliding with ``t`` / ``trial_id``; or naming the argument at fault.
     """
     path = Path(path)
+    _check_argument_types(
+        sensor=sensor,
+        stream=stream,
+        glob=glob,
+        time_column=time_column,
+        trial_column=trial_column,
+        channels=channels,
+        label_columns=label_columns,
+        group_columns=group_columns,
+        class_labels=class_labels,
+        units=units,
+    )
     delimiter, decimal, encoding = _text_options(delimiter, decimal, encoding)
+    # Hydra reads a column named 5 as the number 5; the header's names are text
+    time_column = None if time_column is None else str(time_column)
+    trial_column = None if trial_column is None else str(trial_column)
     roles = _Roles(time_column, trial_column, label_columns, group_columns)
     classes = {
         str(k): tuple(str(c) for c in v) for k, v in (class_labels or {}).items()
@@ -662,6 +677,55 @@ def read_csv_dataset(
         },
         name=path.stem if path.is_file() else path.resolve().name,
     )
+
+
+def _is_names(value: Any) -> bool:
+    return isinstance(value, list | tuple) and all(
+        isinstance(v, str | int) and not isinstance(v, bool) and str(v) for v in value
+    )
+
+
+def _check_argument_types(**given: Any) -> None:
+    """Refuse an argument of the wrong kind, naming it (a text where a list belongs would
+    otherwise be read letter by letter: ``label_columns='slip'`` as columns s, l, i, p)."""
+    expected = {
+        "sensor": ("a non-empty name", lambda v: isinstance(v, str) and v.strip()),
+        "stream": ("a non-empty name", lambda v: isinstance(v, str) and v.strip()),
+        "glob": (
+            "a non-empty file pattern such as '*.csv'",
+            lambda v: isinstance(v, str) and v,
+        ),
+        "time_column": ("a column name or null", lambda v: v is None or _is_names([v])),
+        "trial_column": (
+            "a column name or null",
+            lambda v: v is None or _is_names([v]),
+        ),
+        "channels": (
+            "a list of column names such as [fx, fy] or null",
+            lambda v: v is None or _is_names(v),
+        ),
+        "label_columns": (
+            "a list of column names such as [slip_onset_s] (or [])",
+            _is_names,
+        ),
+        "group_columns": ("a list of column names such as [object] (or [])", _is_names),
+        "class_labels": (
+            "a mapping {label: [class, ...]} or null",
+            lambda v: (
+                v is None
+                or (isinstance(v, Mapping) and all(_is_names(c) for c in v.values()))
+            ),
+        ),
+        "units": (
+            "one unit such as N, a mapping {channel: unit}, or null",
+            lambda v: v is None or isinstance(v, str | Mapping),
+        ),
+    }
+    for name, value in given.items():
+        text, ok = expected[name]
+        if not ok(value):
+            shown = "null" if value is None else repr(value)
+            raise SourceFormatError(f"{name}={shown}: expected {text}")
 
 
 def _text_options(delimiter: Any, decimal: Any, encoding: Any) -> tuple[str, str, str]:
