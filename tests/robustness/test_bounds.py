@@ -281,3 +281,45 @@ def test_a_scene_with_no_samples_is_refused() -> None:
         "scene 'fsr_probe_slide': stream 'fsr' has no samples in any of the 2 trials "
         "(is scene.model's rate or duration too small?)"
     ) == str(refused.value)
+
+
+@pytest.mark.parametrize(
+    ("override", "line"),
+    [
+        (
+            "closedloop.oracle_delays_ms=[-5]",
+            "closedloop.oracle_delays_ms[0]=-5: expected a number in [0, 1000] ms",
+        ),
+        (
+            "closedloop.oracle_delays_ms=abc",
+            "closedloop.oracle_delays_ms=abc: expected a list of delays in ms, e.g. [10, 25]",
+        ),
+        (
+            "closedloop.plant=5",
+            "closedloop.plant=5: expected a mapping of plant parameters",
+        ),
+        (
+            "closedloop.trials_per_speed=0",
+            "closedloop.trials_per_speed=0: expected a whole number in [1, 1000]",
+        ),
+        (
+            "trials_per_speed=100000000",
+            "trials_per_speed=100000000: expected a whole number in [1, 1000] or null",
+        ),
+        (
+            "closedloop.scene=nope",
+            "closedloop.scene=nope: In 'train': Could not find 'scene/nope'; available: ",
+        ),
+    ],
+)
+def test_a_bad_closed_loop_option_is_one_line(
+    override: str, line: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A closed-loop option out of range or of the wrong kind is one line naming it, exit 2, nothing written."""
+    code, _, err = cli(["closedloop", override, f"out={tmp_path / 'cl'}"], capsys)
+    assert (2, 1, True, False) == (
+        code,
+        len(err),
+        err[0].startswith(f"slipkit closedloop: error: {line}"),
+        (tmp_path / "cl").exists(),
+    ), err

@@ -246,11 +246,11 @@ MALFORMED: list[tuple[list[str], str]] = [
     ),
     (
         ["closedloop", "out={tmp}/cl", "trials_per_speed=0"],
-        "trials_per_speed=0: expected a whole number >= 1 or null",
+        "trials_per_speed=0: expected a whole number in [1, 1000] or null",
     ),
     (
         ["closedloop", "out={tmp}/cl", "train_trials=2.5"],
-        "train_trials=2.5: expected a whole number >= 1 or null",
+        "train_trials=2.5: expected a whole number in [1, 10000] or null",
     ),
     (
         ["closedloop", "out={tmp}/cl", "overwrite=yes"],
