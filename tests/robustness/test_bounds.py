@@ -323,3 +323,29 @@ def test_a_bad_closed_loop_option_is_one_line(
         err[0].startswith(f"slipkit closedloop: error: {line}"),
         (tmp_path / "cl").exists(),
     ), err
+
+
+@pytest.mark.parametrize(
+    ("override", "numbers"),
+    [
+        ("scene.model.duration_s=1e9", "3e+13"),
+        ("scene.model.rate_hz=100000", "1.7e+08"),
+    ],
+)
+def test_a_trial_too_large_to_hold_is_refused(
+    override: str, numbers: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A TacTip trial of 1e9 s, or at 100 kHz, is one line with its size, exit 2, before simulating."""
+    code, _, err = cli(
+        ["simulate", "scene=tactip_gravity_drop", override, f"out={tmp_path / 'd'}"],
+        capsys,
+    )
+    assert (2, 1, True, False) == (
+        code,
+        len(err),
+        err[0].startswith(
+            "slipkit simulate: error: scene 'tactip_gravity_drop': stream 'pins' would "
+            f"hold about {numbers} numbers per trial"
+        ),
+        (tmp_path / "d").exists(),
+    ), err
