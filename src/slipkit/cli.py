@@ -236,9 +236,10 @@ def _reference_config(sub: str, overrides: Sequence[str]) -> Any:
     from slipkit import config_dir
 
     try:
-        groups = [
-            o.input_line for o in _parse_overrides(overrides) if _is_group_override(o)
-        ]
+        picked = [o for o in _parse_overrides(overrides) if _is_group_override(o)]
+        if any(o.is_sweep_override() for o in picked):
+            return None  # -m over groups: each job checks its own choices
+        groups = [o.input_line for o in picked]
         if GlobalHydra.instance().is_initialized():
             return compose(config_name=sub, overrides=groups)
         with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
@@ -260,7 +261,10 @@ def check_added_keys(sub: str, overrides: Sequence[str]) -> None:
     from slipkit._options import unknown_key
     from slipkit.errors import SlipkitError
 
-    parsed = _parse_overrides(overrides)
+    try:
+        parsed = _parse_overrides(overrides)
+    except Exception:  # override syntax: Hydra reports it while composing
+        return
     added = [
         o
         for o in parsed
@@ -465,6 +469,11 @@ def main(argv: Sequence[str] | None = None) -> None:
 
     rest = _pick_groups(sub, rest)
     overrides = _check_flags(sub, rest)
+    try:
+        # before Hydra starts: a multirun would make its sweep folder first
+        check_added_keys(sub, overrides)
+    except SlipkitError as exc:
+        _fail(sub, f"error: {exc}", 2)
     run.__name__ = sub.replace("-", "_")
     run.__module__ = __name__
     saved = sys.argv

@@ -153,3 +153,19 @@ def test_a_scene_effect_takes_its_own_keywords() -> None:
         "scene.effects.stick_slip.M_k: unknown key; did you mean scene.effects.stick_slip.M_kg?"
         == str(refused.value)
     )
+
+
+def test_a_multirun_with_an_unknown_key_starts_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """slipkit train -m +model.gama=1,2 is one line before Hydra makes its sweep folder."""
+    code, err = cli(["train", "-m", "+model.gama=1,2", f"run_dir={tmp_path}/r"], capsys)
+    assert (
+        2,
+        ["slipkit train: error: model.gama: unknown key; did you mean model.gamma?"],
+        [],
+    ) == (
+        code,
+        err,
+        sorted(p.name for p in tmp_path.iterdir()),
+    )
