@@ -395,9 +395,7 @@ def _effect_params(name: str) -> set[str] | None:
     effect = EFFECTS.get(effect_name(name))
     if effect is None:
         return None
-    params = list(inspect.signature(effect).parameters.values())[
-        2:
-    ]  # (state, rng, ...)
+    _, _, *params = inspect.signature(effect).parameters.values()  # state, rng, ...
     return {p.name for p in params}
 
 
@@ -418,7 +416,9 @@ def _takes(node: DictConfig, where: str, command: str) -> tuple[set[str], bool]:
     values = list(raw.values()) if isinstance(raw, dict) else []
     named = [v for v in values if v is not None]
     # {} or a mapping of named entries (each a mapping or a list): a new name is an entry.
-    return keys, all(isinstance(v, dict | list) for v in named)
+    return keys, not values or (
+        bool(named) and all(isinstance(v, dict | list) for v in named)
+    )
 
 
 def _closest(word: str, candidates: list[str]) -> list[str]:

@@ -46,6 +46,17 @@ def recording(tmp_path: Path) -> Path:
 
 CASES: list[tuple[list[str], str]] = [
     (
+        # a keyword the estimator takes but the config leaves unset: here + is the way
+        [
+            "compare",
+            "comparison=fsr",
+            "comparison.estimators.window_logreg.random_state=3",
+            "out={tmp}/c",
+        ],
+        "slipkit compare: error: comparison.estimators.window_logreg.random_state: not "
+        "set in the config; add it with +comparison.estimators.window_logreg.random_state=...",
+    ),
+    (
         [
             "import",
             "source=csv",
