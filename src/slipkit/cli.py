@@ -388,12 +388,14 @@ def _each_warning_once(kind: type[Warning]) -> Iterator[None]:
         warnings.showwarning = shown
 
 
-def _task_overrides() -> list[str]:
-    """The running job's command-line overrides (one job's values under ``-m``)."""
+def _multirun_job_overrides() -> list[str]:
+    """A multirun job's overrides (its own values of a ``-m`` sweep); ``[]`` in a single
+    run, whose command line :func:`main` checked before Hydra started."""
     from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
     from omegaconf import OmegaConf
 
-    if not HydraConfig.initialized():
+    if not HydraConfig.initialized() or HydraConfig.get().mode != RunMode.MULTIRUN:
         return []
     # unresolved: an override's text may hold an interpolation (`out=${nope}`)
     task = OmegaConf.to_container(HydraConfig.get().overrides.task, resolve=False)
@@ -448,7 +450,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         # Everything is caught here, inside the task function: an exception that
         # escaped to Hydra would be printed with "Error executing job" first.
         try:
-            check_added_keys(sub, _task_overrides())
+            check_added_keys(sub, _multirun_job_overrides())
             check_options(cfg, sub)
             with _each_warning_once(SlipkitWarning):
                 return task(cfg)
