@@ -79,16 +79,25 @@ def _pick_groups(sub: str, rest: Sequence[str]) -> list[str]:
     """
     from slipkit import config_dir
 
+    options = GROUP_OPTIONS.get(sub, {})
+    given = dict(arg.partition("=")[::2] for arg in rest if "=" in arg)
     out = []
     for arg in rest:
         key, eq, value = arg.partition("=")
-        group = GROUP_OPTIONS.get(sub, {}).get(key)
+        group = options.get(key)
         names = value.split(",")
         if (
             eq
             and group
             and all((config_dir() / group / f"{n}.yaml").is_file() for n in names)
         ):
+            if given.get(group, value) != value:
+                _fail(
+                    sub,
+                    f"error: {key}={value} and {group}={given[group]} name different "
+                    f"options; give one of them",
+                    2,
+                )
             arg = f"{group}={value}"
         out.append(arg)
     return out

@@ -349,3 +349,19 @@ def test_a_trial_too_large_to_hold_is_refused(
         ),
         (tmp_path / "d").exists(),
     ), err
+
+
+def test_scenario_and_closedloop_naming_two_scenarios_is_refused(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """scenario=fsr closedloop=tactip is one line naming both, not a silent pick of one."""
+    code, _, err = cli(
+        ["closedloop", "scenario=fsr", "closedloop=tactip", "--cfg", "job"], capsys
+    )
+    assert (
+        2,
+        [
+            "slipkit closedloop: error: scenario=fsr and closedloop=tactip name different "
+            "options; give one of them"
+        ],
+    ) == (code, err)
