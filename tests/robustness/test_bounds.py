@@ -365,3 +365,22 @@ def test_scenario_and_closedloop_naming_two_scenarios_is_refused(
             "options; give one of them"
         ],
     ) == (code, err)
+
+
+def test_a_composed_config_with_overrides_of_another_scenario_is_refused() -> None:
+    """A config composed with scenario=fsr and tactip's closedloop.* overrides is refused, not run without them."""
+    from hydra import compose, initialize_config_dir
+
+    from slipkit import config_dir
+    from slipkit.closedloop.commands import load_scenario
+
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        cfg = compose("closedloop", ["scenario=fsr", "closedloop.plant.latency_s=0.05"])
+        with pytest.raises(SlipkitError) as refused:
+            load_scenario(cfg)
+        plain = load_scenario(compose("closedloop", ["scenario=fsr"]))
+    assert (
+        "scenario=fsr: the closedloop.* overrides apply to scenario tactip; give "
+        "closedloop=fsr with them",
+        "fsr",
+    ) == (str(refused.value), plain.name)

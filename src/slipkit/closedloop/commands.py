@@ -115,6 +115,15 @@ def load_scenario(cfg: DictConfig) -> DictConfig:
         )
     node = cfg.get("closedloop")
     if node is None or str(node.get("name")) != name:
+        if node is not None:
+            # cfg holds another scenario: overrides of it would be dropped silently
+            other = str(node.get("name"))
+            unchanged = _compose("closedloop", [f"closedloop={other}"]).closedloop
+            if OmegaConf.to_container(node) != OmegaConf.to_container(unchanged):
+                raise SlipkitError(
+                    f"scenario={name}: the closedloop.* overrides apply to scenario "
+                    f"{other}; give closedloop={name} with them"
+                )
         node = _compose(
             "closedloop", [f"closedloop={name}"], f"scenario={name}"
         ).closedloop
