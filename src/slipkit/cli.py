@@ -248,7 +248,10 @@ def _reference_config(sub: str, overrides: Sequence[str]) -> Any:
         picked = [o for o in _parse_overrides(overrides) if _is_group_override(o)]
         if any(o.is_sweep_override() for o in picked):
             return None  # -m over groups: each job checks its own choices
-        groups = [o.input_line for o in picked]
+        # hydra.* settings change no key of the command's own config
+        groups = [
+            o.input_line for o in picked if not o.key_or_group.startswith("hydra")
+        ]
         if GlobalHydra.instance().is_initialized():
             return compose(config_name=sub, overrides=groups)
         with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
