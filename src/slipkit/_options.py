@@ -17,6 +17,9 @@ table of small rules keeps the configs as they are and the messages one line.
 
 from __future__ import annotations
 
+import difflib
+import fnmatch
+import inspect
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -105,6 +108,37 @@ def number(*, minimum: float | None = None, positive: bool = False) -> Rule:
     return Rule("a finite number", _is_number)
 
 
+def within(
+    lo: float,
+    hi: float,
+    unit: str = "",
+    *,
+    above: bool = False,
+    whole_number: bool = False,
+    span: bool = False,
+) -> Rule:
+    """A number in ``[lo, hi]`` (``(lo, hi]`` when ``above``; a whole number when
+    ``whole_number``); with ``span`` also ``[a, b]``, ``a <= b`` both in range (drawn per trial).
+
+    The declared range of a physical parameter: a bound keeps a typo or an extreme
+    (``hold_s=1e9``, ``substeps=1e9``) from running for hours or asking for terabytes.
+    """
+    one = _is_whole if whole_number else _is_number
+
+    def inside(v: Any) -> bool:
+        return one(v) and (lo < v if above else lo <= v) and v <= hi
+
+    def accept(v: Any) -> bool:
+        if span and isinstance(v, ListConfig | list | tuple):
+            return len(v) == 2 and inside(v[0]) and inside(v[1]) and v[0] <= v[1]
+        return inside(v)
+
+    kind = "a whole number" if whole_number else "a number"
+    where = f"{'(' if above else '['}{lo:g}, {hi:g}]" + (f" {unit}" if unit else "")
+    text = f"{kind} or [lo, hi] within {where}" if span else f"{kind} in {where}"
+    return Rule(text, accept)
+
+
 FLAG = Rule("true or false", lambda v: isinstance(v, bool))
 SEED = whole(0, MAX_SEED)
 COUNT = whole(1)
@@ -130,6 +164,10 @@ NAME = Rule(
     ),
 )
 RATE = number(positive=True)
+#: a simulated sensor's sample rate: from 1 Hz (a trial of a few seconds still has
+#: samples) to 100 kHz (tactile sensors sample at tens of kHz at most, the shipped scenes
+#: at 30 Hz-2.2 kHz; a TacTip trial at 100 kHz already holds about 10^8 numbers)
+SCENE_RATE = within(1.0, 1e5, "Hz")
 SEEDS = Rule(
     f"a non-empty list of whole numbers in [0, {MAX_SEED}]",
     lambda v: (
@@ -218,8 +256,8 @@ OPTIONS: dict[str, dict[str, Rule]] = {
         "scenario": TEXT,
         "seeds": SEEDS,
         "train_seed": SEED,
-        "trials_per_speed": COUNT.null(),
-        "train_trials": COUNT.null(),
+        "trials_per_speed": whole(1, 1000).null(),
+        "train_trials": whole(1, 10_000).null(),
         "warmup": whole(0),
         "runs_dir": TEXT,
         "out": TEXT.null(),
@@ -281,12 +319,15 @@ def check_rules(cfg: DictConfig, rules: Mapping[str, Rule], prefix: str = "") ->
         check_value(full, value, rule)
 
 
-def check_rates(cfg: DictConfig, node_key: str, *, nullable: bool) -> None:
-    """Every ``*rate_hz`` option directly under ``node_key`` is a finite number > 0."""
+def check_rates(
+    cfg: DictConfig, node_key: str, *, nullable: bool, rule: Rule = RATE
+) -> None:
+    """Every ``*rate_hz`` option directly under ``node_key`` meets ``rule`` (default: a
+    finite number > 0)."""
     present, missing, node = _lookup(cfg, node_key)
     if not present or missing or not isinstance(node, DictConfig):
         return
-    rule = RATE.null() if nullable else RATE
+    rule = rule.null() if nullable else rule
     for key in map(str, node.keys()):
         if key.endswith("rate_hz"):
             check_rules(cfg, {f"{node_key}.{key}": rule})
@@ -305,14 +346,14 @@ def check_dataset(cfg: DictConfig, prefix: str = "") -> None:
         check_rates(cfg, f"{prefix}source", nullable=True)
     if not path and not raw:
         check_rules(cfg, {"dataset.n_trials": COUNT, "dataset.seed": SEED}, prefix)
-        check_rates(cfg, f"{prefix}scene.model", nullable=False)
+        check_rates(cfg, f"{prefix}scene.model", nullable=False, rule=SCENE_RATE)
 
 
 def check_options(cfg: DictConfig, command: str) -> None:
     """Check the options of ``slipkit <command>``; raise a SlipkitError naming the first bad one."""
     check_rules(cfg, OPTIONS.get(command, {}))
     if command == "simulate":
-        check_rates(cfg, "scene.model", nullable=False)
+        check_rates(cfg, "scene.model", nullable=False, rule=SCENE_RATE)
     elif command == "import":
         check_rates(cfg, "source", nullable=True)
     elif command == "train":
@@ -321,7 +362,122 @@ def check_options(cfg: DictConfig, command: str) -> None:
         check_dataset(cfg, "comparison.")
 
 
+#: Hydra's instantiation keys: a node with a ``_target_`` may be given any of them.
+_INSTANTIATE_KEYS = ("_target_", "_partial_", "_convert_", "_recursive_", "_args_")
+
+#: subcommand -> mappings (dotted, ``*`` matching one key) that take new names although
+#: their entries are plain values: the demo's ``scenario -> family`` style tables. A
+#: mapping of mappings or lists (estimators, detectors, runs, effects, search
+#: parameters) or an empty one (``task_overrides: {}``) takes new names anyway.
+OPEN_MAPPINGS: dict[str, tuple[str, ...]] = {
+    "demo": (
+        "real",
+        "real_comparisons",
+        "closedloop.families",
+        "closedloop.detector.*",
+    ),
+}
+
+
+def _target_params(node: DictConfig) -> set[str] | None:
+    """Keyword names ``node._target_`` takes; None: any (``**kwargs``) or not knowable here."""
+    from hydra.utils import get_object
+
+    try:
+        target = get_object(str(node._get_node("_target_")._value()))  # type: ignore[union-attr]
+        params = inspect.signature(target).parameters.values()
+    except Exception:  # a target that does not load: instantiation says why
+        return None
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
+        return None
+    return {
+        p.name
+        for p in params
+        if p.kind
+        in (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+    }
+
+
+def _effect_params(name: str) -> set[str] | None:
+    """Keyword names of the scene effect behind effect key ``name``; None if not an effect."""
+    from slipkit.sim.core import EFFECTS, _load_effect_modules, effect_name
+
+    _load_effect_modules()
+    effect = EFFECTS.get(effect_name(name))
+    if effect is None:
+        return None
+    _, _, *params = inspect.signature(effect).parameters.values()  # state, rng, ...
+    return {p.name for p in params}
+
+
+def _takes(node: DictConfig, where: str, command: str) -> tuple[set[str], bool]:
+    """(the keys ``node`` at dotted ``where`` takes, whether it takes any other key too)."""
+    keys = {str(k) for k in node}
+    if "_target_" in node:
+        params = _target_params(node)
+        return keys | (params or set()) | set(_INSTANTIATE_KEYS), params is None
+    parent, _, leaf = where.rpartition(".")
+    if parent == "effects" or parent.endswith(".effects"):
+        params = _effect_params(leaf)
+        if params is not None:
+            return keys | params, False
+    if any(fnmatch.fnmatchcase(where, p) for p in OPEN_MAPPINGS.get(command, ())):
+        return keys, True
+    raw = OmegaConf.to_container(node, resolve=False)
+    values = list(raw.values()) if isinstance(raw, dict) else []
+    named = [v for v in values if v is not None]
+    # {} or a mapping of named entries (each a mapping or a list): a new name is an entry.
+    return keys, not values or (
+        bool(named) and all(isinstance(v, dict | list) for v in named)
+    )
+
+
+def _closest(word: str, candidates: list[str]) -> list[str]:
+    """The candidates closest to ``word`` (difflib's ratio >= 0.6, within 0.1 of the best)."""
+    close = difflib.get_close_matches(word, candidates, n=3, cutoff=0.6)
+    scores = [difflib.SequenceMatcher(None, word, c).ratio() for c in close]
+    return [c for c, r in zip(close, scores, strict=True) if r >= max(scores) - 0.1]
+
+
+def unknown_key(cfg: DictConfig, key: str, command: str = "") -> str | None:
+    """Why dotted ``key`` is not an option of ``cfg`` (one line, closest keys suggested); None if it is.
+
+    A key is an option when ``cfg`` has it, when its node has a ``_target_`` whose
+    callable takes it (or any keyword), when its node is a scene effect taking it,
+    or when its node is a mapping of named entries (``estimators``, ``detectors``,
+    ``search.params``, an empty ``{}``; :data:`OPEN_MAPPINGS`).
+    """
+    parts = key.split(".")
+    node: Any = cfg
+    for i, part in enumerate(parts):
+        where = ".".join(parts[:i])
+        here = where or "the config"
+        if not isinstance(node, DictConfig):
+            return f"{key}: unknown key; {here} is one value, not a group of options"
+        keys, any_key = _takes(node, where, command)
+        if part not in node:
+            if any_key or part in keys:
+                return None
+            prefix = f"{where}." if where else ""
+            shown = sorted(k for k in keys if not k.startswith("_"))
+            close = _closest(part, shown)
+            if close:
+                hint = "did you mean " + " or ".join(prefix + c for c in close) + "?"
+            else:
+                more = ", ..." if len(shown) > 12 else ""
+                hint = f"{here} has {', '.join(shown[:12])}{more}"
+            return f"{key}: unknown key; {hint}"
+        try:
+            node = node._get_node(part)
+        except OmegaConfBaseException:
+            return None
+        if not isinstance(node, DictConfig) or node._is_none():
+            node = None
+    return None
+
+
 __all__ = [
+    "OPEN_MAPPINGS",
     "OPTIONS",
     "Rule",
     "check_dataset",
@@ -329,4 +485,6 @@ __all__ = [
     "check_rules",
     "check_value",
     "show",
+    "unknown_key",
+    "within",
 ]

@@ -69,6 +69,44 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+#: subcommand -> {option: config group}: ``option=X`` picks the group's option ``X`` when
+#: ``configs/<group>/X.yaml`` exists, so dotted overrides of the group apply to ``X``
+#: (``slipkit closedloop scenario=fsr closedloop.plant.latency_s=0.05``).
+GROUP_OPTIONS: dict[str, dict[str, str]] = {"closedloop": {"scenario": "closedloop"}}
+
+
+def _pick_groups(sub: str, rest: Sequence[str]) -> list[str]:
+    """``rest`` with each ``option=X`` of :data:`GROUP_OPTIONS` written as ``<group>=X``.
+
+    Left as it is when an ``X`` (or one of a ``-m`` sweep's ``X,Y``) has no config
+    file: the command refuses it, naming the option and the ones there are.
+    """
+    from slipkit import config_dir
+
+    options = GROUP_OPTIONS.get(sub, {})
+    given = dict(arg.partition("=")[::2] for arg in rest if "=" in arg)
+    out = []
+    for arg in rest:
+        key, eq, value = arg.partition("=")
+        group = options.get(key)
+        names = value.split(",")
+        if (
+            eq
+            and group
+            and all((config_dir() / group / f"{n}.yaml").is_file() for n in names)
+        ):
+            if given.get(group, value) != value:
+                _fail(
+                    sub,
+                    f"error: {key}={value} and {group}={given[group]} name different "
+                    f"options; give one of them",
+                    2,
+                )
+            arg = f"{group}={value}"
+        out.append(arg)
+    return out
+
+
 def _usage() -> str:
     width = max(map(len, SUBCOMMANDS))
     rows = "\n".join(
@@ -179,11 +217,112 @@ def _composition_message(exc: Exception) -> str:
     return text
 
 
+def _is_group_override(override: Any) -> bool:
+    """Whether a parsed override picks a config group option (``scene=x``, ``+experiment=x``)."""
+    from slipkit import config_dir
+
+    key = str(override.key_or_group)
+    return (
+        override.package is not None
+        or key == "hydra"
+        or key.startswith(("hydra.", "hydra/"))
+        or (config_dir() / key).is_dir()
+    )
+
+
+def _parse_overrides(overrides: Sequence[str]) -> list[Any]:
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    parsed: list[Any] = OverridesParser.create().parse_overrides(list(overrides))
+    return parsed
+
+
+def _reference_config(sub: str, overrides: Sequence[str]) -> Any:
+    """``configs/<sub>.yaml`` composed with only the group choices of ``overrides``.
+
+    The keys a command knows before any value override: what ``+key=value`` and a
+    mistyped ``key=value`` are checked against. None when even that does not compose.
+    """
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+
+    from slipkit import config_dir
+
+    try:
+        picked = [o for o in _parse_overrides(overrides) if _is_group_override(o)]
+        if any(o.is_sweep_override() for o in picked):
+            return None  # -m over groups: each job checks its own choices
+        # hydra.* settings change no key of the command's own config
+        groups = [
+            o.input_line for o in picked if not o.key_or_group.startswith("hydra")
+        ]
+        if GlobalHydra.instance().is_initialized():
+            return compose(config_name=sub, overrides=groups)
+        with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+            return compose(config_name=sub, overrides=groups)
+    except Exception:  # no reference: the caller keeps Hydra's own message
+        return None
+
+
+def check_added_keys(sub: str, overrides: Sequence[str]) -> None:
+    """Refuse ``+key=value`` / ``++key=value`` for a key the command does not know.
+
+    Hydra adds any such key without a word; the code then ignores it (a mistyped
+    ``+comparison.dataset.pth``) or passes it to a constructor that refuses it
+    (``+model.gama``). Checked against the config composed from the group choices
+    alone (:func:`_reference_config`) with :func:`slipkit._options.unknown_key`:
+    group choices (``+experiment=x``), Hydra's own ``hydra.*``, a keyword the
+    node's ``_target_`` takes and a new entry of a mapping of named entries pass.
+    """
+    from slipkit._options import unknown_key
+    from slipkit.errors import SlipkitError
+
+    try:
+        parsed = _parse_overrides(overrides)
+    except Exception:  # override syntax: Hydra reports it while composing
+        return
+    added = [
+        o
+        for o in parsed
+        if (o.is_add() or o.is_force_add()) and not _is_group_override(o)
+    ]
+    if not added:
+        return
+    reference = _reference_config(sub, overrides)
+    if reference is None:
+        return
+    for override in added:
+        problem = unknown_key(reference, str(override.key_or_group), sub)
+        if problem is not None:
+            raise SlipkitError(problem)
+
+
+def _not_in_config(sub: str, exc: Exception, overrides: Sequence[str]) -> str | None:
+    """Hydra's "Could not override 'x' ... use +x ... not in struct" as one line with the
+    closest keys suggested; None for any other composition error."""
+    import re
+
+    from slipkit._options import unknown_key
+
+    found = re.search(r"Could not override '([^']+)'", str(exc))
+    if found is None or "not in struct" not in _composition_message(exc):
+        return None
+    key = found.group(1)
+    reference = _reference_config(sub, overrides)
+    problem = None if reference is None else unknown_key(reference, key, sub)
+    if problem is not None:
+        return problem
+    if reference is not None:
+        # The key is one the node takes (a constructor keyword) but the config leaves unset.
+        return f"{key}: not set in the config; add it with +{key}=..."
+    return f"{key}: unknown key"
+
+
 class _ArgumentError(Exception):
     """argparse refused the command line (raised instead of printing the usage)."""
 
 
-def _check_flags(sub: str, rest: Sequence[str]) -> None:
+def _check_flags(sub: str, rest: Sequence[str]) -> list[str]:
     """Refuse unknown ``--flags`` in one line before Hydra's parser prints its usage.
 
     Hydra parses the command line with its own ``argparse`` parser, whose ``error``
@@ -193,7 +332,7 @@ def _check_flags(sub: str, rest: Sequence[str]) -> None:
     try:
         from hydra._internal.utils import get_args_parser
     except ImportError:  # pragma: no cover - a Hydra without it: Hydra reports itself
-        return
+        return []
     parser = get_args_parser()
 
     def error(message: str) -> NoReturn:
@@ -207,7 +346,7 @@ def _check_flags(sub: str, rest: Sequence[str]) -> None:
     except _ArgumentError as exc:
         _fail(sub, f"error: {exc} (slipkit {sub} --help lists the options)", 2)
     except SystemExit:
-        return
+        return []
     # Hydra raises a bare ValueError for these (reported as an internal error
     # otherwise); the same rule as hydra._internal.utils._run_hydra, in one line.
     modes = [
@@ -228,6 +367,7 @@ def _check_flags(sub: str, rest: Sequence[str]) -> None:
             "--multirun, --cfg, --info, --shell-completion",
             2,
         )
+    return [str(o) for o in args.overrides]
 
 
 @contextlib.contextmanager
@@ -262,6 +402,20 @@ def _each_warning_once(kind: type[Warning]) -> Iterator[None]:
         yield
     finally:
         warnings.showwarning = shown
+
+
+def _multirun_job_overrides() -> list[str]:
+    """A multirun job's overrides (its own values of a ``-m`` sweep); ``[]`` in a single
+    run, whose command line :func:`main` checked before Hydra started."""
+    from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
+    from omegaconf import OmegaConf
+
+    if not HydraConfig.initialized() or HydraConfig.get().mode != RunMode.MULTIRUN:
+        return []
+    # unresolved: an override's text may hold an interpolation (`out=${nope}`)
+    task = OmegaConf.to_container(HydraConfig.get().overrides.task, resolve=False)
+    return [str(o) for o in task] if isinstance(task, list) else []
 
 
 def main(argv: Sequence[str] | None = None) -> None:
@@ -312,6 +466,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         # Everything is caught here, inside the task function: an exception that
         # escaped to Hydra would be printed with "Error executing job" first.
         try:
+            check_added_keys(sub, _multirun_job_overrides())
             check_options(cfg, sub)
             with _each_warning_once(SlipkitWarning):
                 return task(cfg)
@@ -330,7 +485,13 @@ def main(argv: Sequence[str] | None = None) -> None:
         except Exception as exc:
             _internal_error(sub, exc, rest)
 
-    _check_flags(sub, rest)
+    rest = _pick_groups(sub, rest)
+    overrides = _check_flags(sub, rest)
+    try:
+        # before Hydra starts: a multirun would make its sweep folder first
+        check_added_keys(sub, overrides)
+    except SlipkitError as exc:
+        _fail(sub, f"error: {exc}", 2)
     run.__name__ = sub.replace("-", "_")
     run.__module__ = __name__
     saved = sys.argv
@@ -342,8 +503,10 @@ def main(argv: Sequence[str] | None = None) -> None:
             )(run)()
     except (HydraException, OmegaConfBaseException) as exc:
         # The overrides do not compose (unknown group option, key not in the config,
-        # override syntax): Hydra's message, on one line.
-        _fail(sub, f"error: {_composition_message(exc)}", 2)
+        # override syntax): Hydra's message, on one line; a key not in the config
+        # with the closest keys it has.
+        text = _not_in_config(sub, exc, overrides) or _composition_message(exc)
+        _fail(sub, f"error: {text}", 2)
     except KeyboardInterrupt:
         _fail(sub, "interrupted", 130)
     except Exception as exc:

@@ -38,10 +38,24 @@ from typing import Any
 import numpy as np
 from omegaconf import DictConfig
 
+from slipkit._options import within
 from slipkit.closedloop.detectors import Detector
-from slipkit.closedloop.fsr import _draw, _span
+from slipkit.closedloop.fsr import _draw
 from slipkit.closedloop.pinch import PinchTrial, load_profile, run_pinch_trial
-from slipkit.closedloop.plant import G_M_S2, Actuator, PinchPlant, PlantState
+from slipkit.closedloop.plant import (
+    FORCE_N,
+    G_M_S2,
+    LAG_S,
+    LATENCY_S,
+    PHASE_S,
+    SUBSTEPS,
+    TRAVEL_MM,
+    Actuator,
+    PinchPlant,
+    PlantState,
+    check_grid,
+    check_params,
+)
 from slipkit.closedloop.run import Outcome, speed_grid
 from slipkit.closedloop.scenarios import plant_params, register_scenario
 from slipkit.errors import SlipkitError
@@ -245,42 +259,31 @@ class BioTacSensor:
         return np.array([values[c] for c in names], dtype=np.float64)
 
 
-_REQUIRED = {
-    "mu_prior": "1",
-    "margin": "1",
-    "load_factor": "1",
-    "min_force_N": "N",
-    "max_force_N": "N",
-    "approach_s": "s",
-    "press_s": "s",
-    "lift_s": "s",
-    "hold_s": "s",
-    "post_s": "s",
-    "latency_s": "s",
-    "tau_s": "s",
-    "control_hz": "Hz",
-    "travel_mm": "mm",
+#: Declared ranges of the BioTac plant's parameters (configs/closedloop/biotac.yaml says the same).
+PLANT_RULES = {
+    "mu_prior": within(0.0, 10.0, above=True, span=True),
+    "margin": within(0.0, 2.0, span=True),
+    "load_factor": within(0.0, 10.0, span=True),
+    "min_force_N": within(0.0, 500.0, "N"),
+    "max_force_N": FORCE_N,
+    "approach_s": PHASE_S,
+    "press_s": PHASE_S,
+    "lift_s": within(0.0, 10.0, "s", above=True),
+    "hold_s": PHASE_S,
+    "post_s": PHASE_S,
+    "latency_s": LATENCY_S,
+    "tau_s": LAG_S,
+    "control_hz": within(0.0, 10_000.0, "Hz", above=True),
+    "travel_mm": TRAVEL_MM,
+    "substeps": SUBSTEPS,
 }
+#: load change times of the conditions grid, s
+CHANGE_S = within(0.0, 10.0, "s", above=True)
 
 
 def check_plant(plant: Mapping[str, Any]) -> None:
-    """Refuse plant parameters that cannot run (names the field)."""
-    for key, unit in _REQUIRED.items():
-        value = plant.get(key)
-        try:
-            lo, hi = _span(value)
-        except (TypeError, ValueError, IndexError):
-            lo = hi = math.nan
-        if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo <= hi):
-            raise SlipkitError(
-                f"configs/closedloop/biotac.yaml plant.{key}: expected a number or [lo, hi] "
-                f">= 0 ({unit}); got {value!r}"
-            )
-    for key in ("mu_prior", "lift_s", "control_hz", "max_force_N", "travel_mm"):
-        if not _span(plant[key])[0] > 0:
-            raise SlipkitError(
-                f"configs/closedloop/biotac.yaml plant.{key}: must be > 0; got {plant[key]!r}"
-            )
+    """Refuse plant parameters outside their declared ranges (names the field)."""
+    check_params(plant, PLANT_RULES, optional=("substeps",))
 
 
 @register_scenario("biotac")
@@ -300,8 +303,8 @@ class BioTacScenario:
 
     def conditions(self, scen: DictConfig) -> list[float]:
         """``conditions.n`` log-spaced load-change times from ``conditions.lo`` to ``conditions.hi``, s."""
-        c = scen.conditions
-        return speed_grid(float(c.lo), float(c.hi), int(c.n))
+        lo, hi, n = check_grid(dict(scen.conditions), "closedloop.conditions", CHANGE_S)
+        return speed_grid(lo, hi, n)
 
     def run_trial(
         self,

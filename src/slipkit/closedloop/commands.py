@@ -29,10 +29,18 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig, ListConfig, OmegaConf
 
 from slipkit._files import atomic_dir, check_out_path
-from slipkit._options import COUNT, FLAG, SEED, check_options, check_value
+from slipkit._options import (
+    COUNT,
+    FLAG,
+    SEED,
+    check_options,
+    check_value,
+    whole,
+    within,
+)
 from slipkit.closedloop.detectors import (
     BundleDetector,
     Detector,
@@ -52,10 +60,46 @@ from slipkit.train.runs import new_run_dir
 log = logging.getLogger("slipkit.closedloop")
 
 
-def _compose(name: str, overrides: list[str]) -> DictConfig:
+def _compose(name: str, overrides: list[str], where: str = "") -> DictConfig:
+    """``configs/<name>.yaml`` with ``overrides`` (from the scenario file: ``where`` names the
+    field); a config that does not compose is a one-line SlipkitError naming it."""
     from hydra import compose
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
 
-    return compose(config_name=name, overrides=overrides)
+    try:
+        return compose(config_name=name, overrides=overrides)
+    except (HydraException, OmegaConfBaseException) as exc:
+        from slipkit.cli import _composition_message, one_line
+
+        text = one_line(_composition_message(exc))
+        raise SlipkitError(f"{where or name}: {text}") from None
+
+
+#: Declared ranges of a scenario's own options (configs/closedloop/<family>.yaml)
+TRIALS_PER_SPEED = whole(1, 1000)
+TRAIN_TRIALS = whole(1, 10_000)
+ORACLE_DELAY_MS = within(0.0, 1000.0, "ms")
+
+
+def check_scenario_options(scen: DictConfig) -> None:
+    """Refuse a scenario option outside its declared range, naming it."""
+    for key, rule in (
+        ("trials_per_speed", TRIALS_PER_SPEED),
+        ("train_trials", TRAIN_TRIALS),
+    ):
+        check_value(f"closedloop.{key}", scen.get(key), rule)
+    delays = scen.get("oracle_delays_ms") or []
+    if not isinstance(delays, ListConfig | list):
+        raise SlipkitError(
+            f"closedloop.oracle_delays_ms={delays}: expected a list of delays in ms, e.g. [10, 25]"
+        )
+    for i, delay in enumerate(delays):
+        check_value(f"closedloop.oracle_delays_ms[{i}]", delay, ORACLE_DELAY_MS)
+    if not isinstance(scen.get("plant"), DictConfig):
+        raise SlipkitError(
+            f"closedloop.plant={scen.get('plant')}: expected a mapping of plant parameters"
+        )
 
 
 def load_scenario(cfg: DictConfig) -> DictConfig:
@@ -71,7 +115,18 @@ def load_scenario(cfg: DictConfig) -> DictConfig:
         )
     node = cfg.get("closedloop")
     if node is None or str(node.get("name")) != name:
-        node = _compose("closedloop", [f"closedloop={name}"]).closedloop
+        if node is not None:
+            # cfg holds another scenario: overrides of it would be dropped silently
+            other = str(node.get("name"))
+            unchanged = _compose("closedloop", [f"closedloop={other}"]).closedloop
+            if OmegaConf.to_container(node) != OmegaConf.to_container(unchanged):
+                raise SlipkitError(
+                    f"scenario={name}: the closedloop.* overrides apply to scenario "
+                    f"{other}; give closedloop={name} with them"
+                )
+        node = _compose(
+            "closedloop", [f"closedloop={name}"], f"scenario={name}"
+        ).closedloop
     plain = OmegaConf.to_container(node, resolve=True)
     if not isinstance(plain, dict):
         raise SlipkitError(f"configs/closedloop/{name}.yaml: expected a mapping")
@@ -83,6 +138,7 @@ def load_scenario(cfg: DictConfig) -> DictConfig:
     for key in ("trials_per_speed", "train_trials"):
         if cfg.get(key) is not None:
             scen[key] = int(cfg[key])
+    check_scenario_options(scen)
     return scen
 
 
@@ -154,7 +210,7 @@ def train_run(spec: Mapping[str, Any], n_trials: int, seed: int, run_dir: Path) 
         f"run_dir={run_dir}",
         *[str(o) for o in spec.get("overrides") or []],
     ]
-    tcfg = _compose("train", overrides)
+    tcfg = _compose("train", overrides, f"closedloop.runs.{run_dir.name}")
     _, text = _quiet(train_main, tcfg)
     (run_dir.parent / f"{run_dir.name}.train.log").write_text(text)
     return run_dir
@@ -181,6 +237,7 @@ def export_bundle(
             "parity.max_calls=5000",
             *[str(o) for o in overrides],
         ],
+        f"closedloop.detectors.{out.name}.export",
     )
     path, text = _quiet(export_main, ecfg)
     (out.parent / f"{out.name}.export.log").write_text(text)
@@ -285,6 +342,7 @@ def run_scenario(
     scene_cfg = _compose(
         "train",
         [f"scene={scen.scene}", *[str(o) for o in scen.get("scene_overrides") or []]],
+        f"closedloop.scene={scen.scene}",
     ).scene
     scene = build_scene(scene_cfg)
     scenario.check(scen, scene)

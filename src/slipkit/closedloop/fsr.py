@@ -36,9 +36,26 @@ from typing import Any
 import numpy as np
 from omegaconf import DictConfig
 
+from slipkit._options import within
 from slipkit.closedloop.detectors import Detector
 from slipkit.closedloop.pinch import PinchTrial, load_profile, run_pinch_trial
-from slipkit.closedloop.plant import G_M_S2, Actuator, PinchPlant, PlantState
+from slipkit.closedloop.plant import (
+    FORCE_N,
+    G_M_S2,
+    LAG_S,
+    LATENCY_S,
+    MASS_KG,
+    MU_K,
+    MU_S,
+    PHASE_S,
+    SUBSTEPS,
+    TRAVEL_MM,
+    Actuator,
+    PinchPlant,
+    PlantState,
+    check_grid,
+    check_params,
+)
 from slipkit.closedloop.run import Outcome, speed_grid
 from slipkit.closedloop.scenarios import plant_params, register_scenario
 from slipkit.errors import SlipkitError
@@ -268,48 +285,45 @@ class FSRSensor:
         return np.asarray(one.signals["fsr"], dtype=np.float64)
 
 
-_REQUIRED = {
-    "mass_kg": "kg",
-    "mu_s": "1",
-    "mu_k": "1",
-    "margin": "1",
-    "load_factor": "1",
-    "approach_s": "s",
-    "close_s": "s",
-    "lift_s": "s",
-    "hold_s": "s",
-    "post_s": "s",
-    "latency_s": "s",
-    "tau_s": "s",
-    "step_frac": "1",
-    "refractory_s": "s",
-    "max_force_N": "N",
-    "travel_mm": "mm",
-    "pass_mm": "mm",
+#: Declared ranges of the FSR plant's parameters (configs/closedloop/fsr.yaml says the same).
+PLANT_RULES = {
+    "mass_kg": MASS_KG,
+    "mu_s": MU_S,
+    "mu_k": MU_K,
+    "contacts": within(1, 5, whole_number=True),
+    "margin": within(0.0, 2.0, span=True),
+    "load_factor": within(1.0, 10.0, span=True),
+    "approach_s": PHASE_S,
+    "close_s": PHASE_S,
+    "lift_s": PHASE_S,
+    "hold_s": PHASE_S,
+    "post_s": PHASE_S,
+    "latency_s": LATENCY_S,
+    "tau_s": LAG_S,
+    "step_frac": within(0.0, 2.0),
+    "refractory_s": within(0.0, 1.0, "s"),
+    "max_force_N": FORCE_N,
+    "travel_mm": TRAVEL_MM,
+    "pass_mm": within(0.0, 100.0, "mm", above=True),
+    "substeps": SUBSTEPS,
 }
+#: load rise times of the conditions grid, s
+RISE_S = within(0.0, 10.0, "s", above=True)
 
 
-def check_plant(plant: Mapping[str, Any], family: str = "fsr") -> None:
-    """Refuse plant parameters that cannot run (names the field)."""
-    for key, unit in _REQUIRED.items():
-        value = plant.get(key)
-        try:
-            lo, hi = _span(value)
-        except (TypeError, ValueError, IndexError):
-            lo = hi = math.nan
-        if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo <= hi):
-            raise SlipkitError(
-                f"configs/closedloop/{family}.yaml plant.{key}: expected a number or [lo, hi] "
-                f">= 0 ({unit}); got {value!r}"
-            )
+def check_plant(plant: Mapping[str, Any]) -> None:
+    """Refuse plant parameters outside their declared ranges (names the field)."""
+    check_params(plant, PLANT_RULES, optional=("contacts", "substeps"))
     if _span(plant["mu_k"])[1] > _span(plant["mu_s"])[0]:
         raise SlipkitError(
-            f"configs/closedloop/{family}.yaml plant.mu_k: must not exceed plant.mu_s"
+            f"closedloop.plant.mu_k={plant['mu_k']}: must not exceed closedloop.plant.mu_s "
+            f"({plant['mu_s']})"
         )
     if _span(plant["load_factor"])[0] <= 1.0 + _span(plant["margin"])[1]:
         raise SlipkitError(
-            f"configs/closedloop/{family}.yaml plant.load_factor: must exceed 1 + plant.margin "
-            "(else the load increase never starts a slide)"
+            f"closedloop.plant.load_factor={plant['load_factor']}: must exceed 1 + "
+            f"closedloop.plant.margin ({plant['margin']}; else the load increase never "
+            "starts a slide)"
         )
 
 
@@ -330,8 +344,8 @@ class FSRScenario:
 
     def conditions(self, scen: DictConfig) -> list[float]:
         """``conditions.n`` log-spaced rise times from ``conditions.lo`` to ``conditions.hi``, s."""
-        c = scen.conditions
-        return speed_grid(float(c.lo), float(c.hi), int(c.n))
+        lo, hi, n = check_grid(dict(scen.conditions), "closedloop.conditions", RISE_S)
+        return speed_grid(lo, hi, n)
 
     def run_trial(
         self,

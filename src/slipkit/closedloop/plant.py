@@ -27,12 +27,75 @@ integration against the closed forms (:func:`slip_distance_driven`).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
+from slipkit._options import Rule, check_value, within
 from slipkit.errors import SlipkitError
 
 G_M_S2 = 9.81  # gravitational acceleration, m/s^2
+
+# Declared ranges of the parameters every family's plant shares (the configs'
+# comments say the same): wide enough for any gripper or hand, narrow enough that a
+# typo cannot ask for hours of simulation or terabytes of frames.
+#: actuator dead time, s: a trial simulates about a second after the slip
+LATENCY_S = within(0.0, 0.5, "s")
+#: actuator first-order lag, s
+LAG_S = within(0.0, 0.5, "s")
+#: one phase of a trial (approach, press, lift, hold, after), s
+PHASE_S = within(0.0, 10.0, "s")
+#: plant integration steps per sensor frame
+SUBSTEPS = within(1, 64, whole_number=True)
+#: object mass, kg (a value or a [lo, hi] drawn per trial)
+MASS_KG = within(0.0, 20.0, "kg", above=True, span=True)
+#: static and kinetic friction coefficients (silicone skins reach about 3)
+MU_S = within(0.0, 5.0, above=True, span=True)
+MU_K = within(0.0, 5.0, span=True)
+#: grip force limit of a hand or gripper, N
+FORCE_N = within(0.0, 500.0, "N", above=True)
+#: slide that loses the object, mm
+TRAVEL_MM = within(0.0, 5000.0, "mm", above=True)
+
+
+def check_params(
+    params: Mapping[str, Any],
+    rules: Mapping[str, Rule],
+    where: str = "closedloop.plant",
+    *,
+    optional: Collection[str] = (),
+) -> None:
+    """Refuse the first parameter outside its declared range, naming it.
+
+    ``closedloop.plant.hold_s=1e9: expected a number in [0, 10] s`` (a
+    :class:`~slipkit.errors.SlipkitError`); ``params`` is a plain mapping. A key in
+    ``optional`` may be left out (the code has a default for it).
+    """
+    for key, rule in rules.items():
+        if key in optional and key not in params:
+            continue
+        check_value(f"{where}.{key}", params.get(key), rule)
+
+
+def span(value: Any) -> tuple[float, float]:
+    """``(lo, hi)`` of a parameter given as a number or as ``[lo, hi]`` (drawn per trial)."""
+    items = list(value) if isinstance(value, list | tuple) else [value, value]
+    return float(items[0]), float(items[-1])
+
+
+#: a grid of conditions: ``n`` values log-spaced from ``lo`` to ``hi``
+GRID_N = within(1, 100, whole_number=True)
+
+
+def check_grid(
+    node: Mapping[str, Any], where: str, value: Rule, *, n: Rule = GRID_N
+) -> tuple[float, float, int]:
+    """``(lo, hi, n)`` of a conditions grid ``{lo, hi, n}`` at ``where``, each in range, ``lo <= hi``."""
+    check_params(node, {"lo": value, "hi": value, "n": n}, where)
+    lo, hi = float(node["lo"]), float(node["hi"])
+    if lo > hi:
+        raise SlipkitError(f"{where}.lo={lo:g}: expected <= {where}.hi ({hi:g})")
+    return lo, hi, int(node["n"])
 
 
 def _check(

@@ -38,7 +38,7 @@ effects (``gross_deflection``, ``white_noise``) called as functions on a one-fra
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import partial
 from typing import Any
@@ -46,8 +46,17 @@ from typing import Any
 import numpy as np
 from omegaconf import DictConfig
 
+from slipkit._options import within
 from slipkit.closedloop.detectors import Detector
-from slipkit.closedloop.plant import PlantState
+from slipkit.closedloop.plant import (
+    LAG_S,
+    SUBSTEPS,
+    TRAVEL_MM,
+    PlantState,
+    check_grid,
+    check_params,
+    span,
+)
 from slipkit.closedloop.run import Outcome, speed_grid
 from slipkit.closedloop.scenarios import plant_params, register_scenario
 from slipkit.errors import SlipkitError
@@ -457,60 +466,27 @@ class SlipTackPlant:
         return self.state
 
 
-def _positive(plant: Mapping[str, Any], key: str, *, strict: bool = True) -> float:
-    value = plant.get(key)
-    number = (
-        float(value)
-        if isinstance(value, int | float) and not isinstance(value, bool)
-        else math.nan
-    )
-    if not (math.isfinite(number) and (number > 0 if strict else number >= 0)):
-        sign = ">" if strict else ">="
-        raise SlipkitError(
-            f"closedloop.plant.{key}: expected a finite number {sign} 0; got {value!r}"
-        )
-    return number
-
-
-def _range(plant: Mapping[str, Any], key: str) -> tuple[float, float]:
-    value = plant.get(key)
-    if (
-        not isinstance(value, Sequence)
-        or isinstance(value, str)
-        or len(value) != 2
-        or not all(isinstance(v, int | float) and math.isfinite(v) for v in value)
-        or not 0 <= value[0] <= value[1]
-    ):
-        raise SlipkitError(
-            f"closedloop.plant.{key}: expected [lo, hi] with 0 <= lo <= hi; got {value!r}"
-        )
-    return float(value[0]), float(value[1])
+#: Declared ranges of the SlipTack plant's parameters (configs/closedloop/sliptack.yaml says the same).
+PLANT_RULES = {
+    "read_s": within(0.0, 1.0, "s"),
+    "motor_s": within(0.0, 1.0, "s"),
+    "close_tau_s": LAG_S,
+    "regrasp_mm": within(0.0, 50.0, "mm", above=True),
+    "onset_s": within(0.0, 10.0, "s", span=True),
+    "post_s": within(0.0, 10.0, "s", above=True),
+    "drop_travel_mm": TRAVEL_MM,
+    "pull_travel_mm": TRAVEL_MM,
+    "pull_load_ratio": within(1.0, 10.0, above=True, span=True),
+    "nib_count": within(0.0, 10_000.0, above=True),
+    "substeps": SUBSTEPS,
+}
+#: pull speeds of the conditions grid, mm/s
+PULL_MM_S = within(0.0, 1000.0, "mm/s", above=True)
 
 
 def check_plant(plant: Mapping[str, Any]) -> None:
-    """Refuse SlipTack plant parameters that cannot run (names the field)."""
-    for key in ("read_s", "motor_s", "close_tau_s"):
-        _positive(plant, key, strict=False)
-    for key in (
-        "regrasp_mm",
-        "post_s",
-        "drop_travel_mm",
-        "pull_travel_mm",
-        "nib_count",
-    ):
-        _positive(plant, key)
-    _range(plant, "onset_s")
-    lo, _ = _range(plant, "pull_load_ratio")
-    if lo <= 1.0:
-        raise SlipkitError(
-            f"closedloop.plant.pull_load_ratio: the low end must exceed 1 (the pull must "
-            f"break static friction); got {plant.get('pull_load_ratio')!r}"
-        )
-    substeps = plant.get("substeps", 4)
-    if not isinstance(substeps, int) or isinstance(substeps, bool) or substeps < 1:
-        raise SlipkitError(
-            f"closedloop.plant.substeps: expected a whole number >= 1; got {substeps!r}"
-        )
+    """Refuse SlipTack plant parameters outside their declared ranges (names the field)."""
+    check_params(plant, PLANT_RULES, optional=("substeps",))
 
 
 def run_sliptack_trial(
@@ -544,7 +520,7 @@ def run_sliptack_trial(
         Pull speed, mm/s; 0 for the drop.
     """
     rng = np.random.default_rng([int(seed), int(condition_index), int(trial)])
-    lo, hi = (float(v) for v in plant_cfg["onset_s"])
+    lo, hi = span(plant_cfg["onset_s"])
     common: dict[str, Any] = {
         "regrasp_mm": float(plant_cfg["regrasp_mm"]),
         "close_tau_s": float(plant_cfg["close_tau_s"]),
@@ -563,7 +539,7 @@ def run_sliptack_trial(
         row = model.friction[str(params["material"])]
         nib_count = float(plant_cfg["nib_count"])
         grip_mm = float(params["normal_force_N"]) * nib_count / k_a
-        ratio = float(rng.uniform(*_range(plant_cfg, "pull_load_ratio")))
+        ratio = float(rng.uniform(*span(plant_cfg["pull_load_ratio"])))
         release = float(rng.uniform(lo, hi))
         plant = SlipTackPlant(
             mode="pull",
@@ -707,22 +683,15 @@ class SlipTackScenario:
 
     def conditions(self, scen: DictConfig) -> list[float]:
         """``pull_speeds.n`` log-spaced pull speeds (mm/s), then 0 (the drop) if ``drop``."""
-        sp = scen.pull_speeds
-        lo, hi, n = sp.get("lo"), sp.get("hi"), sp.get("n")
-        if not (isinstance(n, int) and not isinstance(n, bool) and n >= 0):
-            raise SlipkitError(
-                f"closedloop.pull_speeds.n: expected a whole number >= 0; got {n!r}"
-            )
-        numbers = all(
-            isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
-            for v in (lo, hi)
+        sp = dict(scen.pull_speeds)
+        check_params(
+            sp, {"n": within(0, 100, whole_number=True)}, "closedloop.pull_speeds"
         )
-        if n and not (numbers and 0 < lo <= hi):
-            raise SlipkitError(
-                f"closedloop.pull_speeds: expected 0 < lo <= hi (mm/s); got lo={lo!r}, "
-                f"hi={hi!r}"
-            )
-        out = speed_grid(float(lo), float(hi), n) if n else []
+        out = (
+            speed_grid(*check_grid(sp, "closedloop.pull_speeds", PULL_MM_S))
+            if sp["n"]
+            else []
+        )
         if bool(scen.get("drop", True)):
             out = [*out, 0.0]
         if not out:

@@ -25,8 +25,20 @@ from typing import Any
 import numpy as np
 from omegaconf import DictConfig
 
+from slipkit._options import within
 from slipkit.closedloop.detectors import Detector
-from slipkit.closedloop.plant import Actuator, GraspPlant, PlantState
+from slipkit.closedloop.plant import (
+    LAG_S,
+    LATENCY_S,
+    SUBSTEPS,
+    TRAVEL_MM,
+    Actuator,
+    GraspPlant,
+    PlantState,
+    check_grid,
+    check_params,
+    span,
+)
 from slipkit.closedloop.run import Outcome, speed_grid
 from slipkit.closedloop.scenarios import plant_params, register_scenario
 from slipkit.errors import SlipkitError
@@ -265,20 +277,24 @@ def draw_trial(
     return params, model.trial(params)
 
 
+#: Declared ranges of the TacTip plant's parameters (configs/closedloop/tactip.yaml says the same).
+PLANT_RULES = {
+    "onset_s": within(0.0, 10.0, "s", span=True),
+    "post_s": within(0.0, 10.0, "s", above=True),
+    "latency_s": LATENCY_S,
+    "tau_s": LAG_S,
+    "catch_mm_s": within(0.0, 1000.0, "mm/s", above=True),
+    "catch_indentation_mm": within(0.0, 20.0, "mm", above=True),
+    "travel_mm": TRAVEL_MM,
+    "substeps": SUBSTEPS,
+}
+#: retraction speeds of the conditions grid, mm/s
+SPEED_MM_S = within(0.0, 1000.0, "mm/s", above=True)
+
+
 def check_scenario(plant: Mapping[str, Any]) -> None:
-    """Refuse plant parameters that cannot run (names the field)."""
-    for key in ("latency_s", "tau_s"):
-        value = plant.get(key)
-        if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
-            raise SlipkitError(
-                f"closedloop.plant.{key}: expected a finite number >= 0 s; got {value!r}"
-            )
-    for key in ("catch_mm_s", "catch_indentation_mm", "travel_mm", "post_s"):
-        value = plant.get(key)
-        if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
-            raise SlipkitError(
-                f"closedloop.plant.{key}: expected a finite number > 0; got {value!r}"
-            )
+    """Refuse plant parameters outside their declared ranges (names the field)."""
+    check_params(plant, PLANT_RULES, optional=("substeps",))
 
 
 def run_tactip_trial(
@@ -318,7 +334,7 @@ def run_tactip_trial(
             f"scene; got {type(model).__name__}"
         )
     rng = np.random.default_rng([int(seed), int(condition_index), int(trial)])
-    lo, hi = (float(v) for v in plant_cfg["onset_s"])
+    lo, hi = span(plant_cfg["onset_s"])
     params, tr = draw_trial(model, rng, speed_mm_s=speed_mm_s, onset_s=(lo, hi))
     sensor = TacTipSensor(scene, tr, rng)
     check_frame(detector, sensor, scene.name)
@@ -414,8 +430,9 @@ class TacTipScenario:
 
     def conditions(self, scen: DictConfig) -> list[float]:
         """``speeds.n`` log-spaced retraction speeds from ``speeds.lo`` to ``speeds.hi``, mm/s."""
-        sp = scen.speeds
-        return speed_grid(float(sp.lo), float(sp.hi), int(sp.n))
+        return speed_grid(
+            *check_grid(dict(scen.speeds), "closedloop.speeds", SPEED_MM_S)
+        )
 
     def run_trial(
         self,

@@ -239,6 +239,13 @@ def _check_table(
         )
     table = table.loc[:, expected].reset_index(drop=True)
     for col in ["t", *spec.channels]:
+        if pd.api.types.is_bool_dtype(table[col]):
+            # true/false would pass as 1/0 and train as a signal nobody recorded
+            raise DatasetError(
+                where,
+                f"column {col!r} holds true/false values (dtype {table[col].dtype}); "
+                "expected numbers (write 1/0 if it is a measured on/off signal)",
+            )
         if not _is_numeric(table[col]):
             raise DatasetError(
                 where,

@@ -126,9 +126,14 @@ class RealtimeOptions:
         }
 
 
+#: core numbers --cpus takes are below this (Linux's largest usual NR_CPUS): a typo such
+#: as 0-999999999 is refused instead of building a set of a billion numbers
+MAX_CPUS = 4096
+
+
 def parse_cpus(text: str) -> tuple[int, ...]:
     """``"0,2-3"`` -> ``(0, 2, 3)``; :class:`OptionError` naming ``--cpus`` otherwise."""
-    out: set[int] = set()
+    spans: list[tuple[int, int]] = []
     try:
         for part in text.split(","):
             lo, _, hi = part.strip().partition("-")
@@ -136,12 +141,16 @@ def parse_cpus(text: str) -> tuple[int, ...]:
             b = int(hi) if hi else a
             if a < 0 or b < a:
                 raise ValueError
-            out.update(range(a, b + 1))
+            spans.append((a, b))
     except ValueError:
         raise OptionError(
             "--cpus", f"must be core numbers and ranges such as 0,2-3; got {text!r}"
         ) from None
-    return tuple(sorted(out))
+    if max(b for _, b in spans) >= MAX_CPUS:
+        raise OptionError(
+            "--cpus", f"core numbers must be below {MAX_CPUS}; got {text!r}"
+        )
+    return tuple(sorted({c for a, b in spans for c in range(a, b + 1)}))
 
 
 def parse_priority(text: str) -> tuple[str, int | None]:

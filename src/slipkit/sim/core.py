@@ -352,6 +352,12 @@ class Scene:
                 indices, desc=f"simulate {self.name}", unit="trial", leave=False
             )
         trials = [self.run_trial(i, seed) for i in indices]
+        for stream in self.model.streams():
+            if all(len(t.streams.get(stream, ())) == 0 for t in trials):
+                raise SimulationError(
+                    f"scene {self.name!r}: stream {stream!r} has no samples in any of the "
+                    f"{n_trials} trials (is scene.model's rate or duration too small?)"
+                )
         provenance: dict[str, Any] = {
             "scene": self.name,
             "seed": int(seed),

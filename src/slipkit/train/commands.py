@@ -275,8 +275,9 @@ def check_trainable(dataset: Any, task: Task) -> None:
     Raises
     ------
     SlipkitError
-        The dataset holds no trials, lacks a stream the task reads, or a channel the
-        estimator reads holds no finite value (all NaN or infinite).
+        The dataset holds no trials, lacks a stream the task reads, a channel the
+        estimator reads holds no finite value (all NaN or infinite), or the class
+        label the task learns (``task.label``) has fewer than two classes in it.
     """
     import numpy as np
 
@@ -284,6 +285,17 @@ def check_trainable(dataset: Any, task: Task) -> None:
         raise SlipkitError(
             f"dataset {dataset.name!r} holds no trials; there is nothing to train on"
         )
+    label = getattr(task, "label", None)
+    labels = getattr(dataset, "labels", None) or {}
+    spec = labels.get(label) if isinstance(label, str) else None
+    if spec is not None and spec.classes is not None and label in dataset.trials:
+        seen = sorted(map(str, dataset.trials[label].dropna().unique()))
+        if len(seen) < 2:
+            raise SlipkitError(
+                f"task.label={label}: dataset {dataset.name!r} has "
+                f"{'one class ' + repr(seen[0]) if seen else 'no class'} in its "
+                f"{len(dataset)} trials; a classifier needs trials of at least two classes"
+            )
     for key in INPUT_STREAM_KEYS:
         name = getattr(task, key, None)
         if not isinstance(name, str):

@@ -10,6 +10,8 @@ a ``trial_column`` splits a file into trials. The helpers :func:`read_csv_file`,
 
 from __future__ import annotations
 
+import codecs
+import csv
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -46,34 +48,119 @@ def line_of(row: int) -> int:
     return int(row) + 2
 
 
-def read_csv_file(file: Path) -> pd.DataFrame:
+def _delimiter_hint(sample: str, delimiter: str, option: str | None) -> str:
+    """``"; is the delimiter ';'? set source.delimiter=';'"`` when ``sample`` (the first
+    lines) splits cleanly on another delimiter (:class:`csv.Sniffer`); else ``""``."""
+    try:
+        found = csv.Sniffer().sniff(sample, delimiters=",;\t|").delimiter
+    except csv.Error:
+        return ""
+    if found == delimiter:
+        return ""
+    if option is None:
+        return f"; is the delimiter {found!r}?"
+    # quoted for the shell: Hydra's override grammar needs ';' inside quotes
+    return f'; is the delimiter {found!r}? set "{option}={found!r}"'
+
+
+def _first_lines(file: Path, encoding: str, n: int = 3) -> list[str]:
+    """The first ``n`` lines of ``file`` (each read up to 1 MiB: only their start is needed)."""
+    lines = []
+    with file.open(encoding=encoding, newline="") as handle:
+        for _ in range(n):
+            line = handle.readline(1 << 20)
+            if not line:
+                break
+            lines.append(line)
+    return lines
+
+
+def _check_second_line(
+    file: Path, delimiter: str, encoding: str, option: str | None
+) -> None:
+    """Refuse a first data row with more fields than the header before pandas reads it.
+
+    pandas takes the extra leading fields of that row as an index (silently), and a
+    row of millions of fields as millions of index levels: minutes and gigabytes
+    before a MemoryError. The header and the first row are read here with the
+    :mod:`csv` module (quotes respected; each line read up to 1 MiB at most).
+    """
+    lines = _first_lines(file, encoding)
+    if len(lines) < 2:
+        return
+    try:
+        header, row = csv.reader(lines[:2], delimiter=delimiter)
+    except (csv.Error, ValueError):  # a field over csv's size limit: pandas reports it
+        return
+    if len(row) > len(header):
+        cut = not lines[1].endswith(("\n", "\r"))  # read up to 1 MiB only
+        more = "at least " if cut else ""
+        raise SourceFormatError(
+            f"{file}: line 2 has {more}{len(row)} fields but the header (line 1) has "
+            f"{len(header)}; every row needs as many fields as the header"
+            f"{_delimiter_hint(''.join(lines), delimiter, option)}"
+        )
+
+
+def read_csv_file(
+    file: Path,
+    *,
+    delimiter: str = ",",
+    decimal: str = ".",
+    encoding: str = "utf-8",
+    delimiter_option: str | None = None,
+) -> pd.DataFrame:
     """Read one CSV with a header line, naming the file on any parse failure.
 
     Blank lines are kept as rows while parsing so that row ``i`` is always file
     line ``i + 2`` (see :func:`line_of`); blank lines at the end are dropped.
 
+    Parameters
+    ----------
+    delimiter, decimal : str
+        Field separator and decimal mark, one character each (European exports:
+        ``;`` and ``,``).
+    encoding : str
+        Text encoding of the file (``utf-8``, ``latin-1``, ``cp1252``...).
+    delimiter_option : str, optional
+        The option that sets ``delimiter`` (``source.delimiter``), named in the hint
+        when a row has the wrong number of fields and another delimiter fits.
+
     Raises
     ------
     SourceFormatError
-        The file is missing, empty, not text, or has a row with more fields than
-        the header (the message names the line).
+        The file is missing, empty, not text in ``encoding``, or has a row with more
+        fields than the header (the message names the line).
     """
     try:
-        df = pd.read_csv(file, skip_blank_lines=False)
+        _check_second_line(file, delimiter, encoding, delimiter_option)
+        df = pd.read_csv(
+            file,
+            sep=delimiter,
+            decimal=decimal,
+            encoding=encoding,
+            skip_blank_lines=False,
+        )
     except FileNotFoundError as exc:
         raise SourceFormatError(f"{file}: no such file") from exc
+    except IsADirectoryError as exc:
+        raise SourceFormatError(f"{file}: is a folder; expected a CSV file") from exc
     except pd.errors.EmptyDataError as exc:
         raise SourceFormatError(
             f"{file}: is empty; expected a header line and data rows"
         ) from exc
     except pd.errors.ParserError as exc:
         detail = str(exc).strip().replace("Error tokenizing data. C error: ", "")
+        sample = "".join(_first_lines(file, encoding))
         raise SourceFormatError(
             f"{file}: malformed CSV ({detail}); every row needs as many fields as "
-            "the header"
+            f"the header{_delimiter_hint(sample, delimiter, delimiter_option)}"
         ) from exc
     except UnicodeDecodeError as exc:
-        raise SourceFormatError(f"{file}: is not a UTF-8 text CSV ({exc})") from exc
+        raise SourceFormatError(
+            f"{file}: is not {encoding} text ({exc}); give the file's encoding"
+            + (" (source.encoding=latin-1, cp1252...)" if delimiter_option else "")
+        ) from exc
     if not df.index.equals(pd.RangeIndex(len(df))):
         # pandas takes the first field(s) as an index, silently, when *every* data
         # row has more fields than the header: the columns would shift by one.
@@ -82,20 +169,29 @@ def read_csv_file(file: Path) -> pd.DataFrame:
             f"header (line 1) has {len(df.columns)}; every row needs as many fields "
             "as the header"
         )
-    _check_header_names(file)
+    _check_header_names(file, delimiter, encoding)
     filled = df.notna().any(axis=1).to_numpy()
     n_keep = int(np.flatnonzero(filled)[-1]) + 1 if filled.any() else 0
     return df.iloc[:n_keep]
 
 
-def _check_header_names(file: Path) -> None:
+def _check_header_names(
+    file: Path, delimiter: str = ",", encoding: str = "utf-8"
+) -> None:
     """Refuse empty or repeated names in the header line.
 
     pandas renames them silently (``Unnamed: 2``, ``fx.1``), so the header is read
     again as text (one line) to see the names as written.
     """
     raw = pd.read_csv(
-        file, header=None, nrows=1, dtype=str, keep_default_na=False, index_col=False
+        file,
+        header=None,
+        nrows=1,
+        dtype=str,
+        keep_default_na=False,
+        index_col=False,
+        sep=delimiter,
+        encoding=encoding,
     )
     names = ["" if pd.isna(v) else str(v) for v in raw.iloc[0].tolist()]
     seen: dict[str, int] = {}
@@ -293,6 +389,9 @@ def read_csv_dataset(
     trial_column: str | None = None,
     class_labels: Mapping[str, Sequence[str]] | None = None,
     glob: str = "*.csv",
+    delimiter: str = ",",
+    decimal: str = ".",
+    encoding: str = "utf-8",
 ) -> Dataset:
     """Read CSV files with a header line into a one-stream dataset.
 
@@ -339,6 +438,13 @@ def read_csv_dataset(
         values are stored as text.
     glob : str
         File pattern when ``path`` is a folder (``"**/*.csv"`` to recurse).
+    delimiter : str
+        Field separator, one character (``";"`` for European exports; ``"\\t"`` or
+        ``"tab"`` for a tab).
+    decimal : str
+        Decimal mark, one character (``","`` for decimal commas).
+    encoding : str
+        Text encoding of the files (``"utf-8"``, ``"latin-1"``, ``"cp1252"``...).
 
     Returns
     -------
@@ -355,6 +461,22 @@ def read_csv_dataset(
         colliding with ``t`` / ``trial_id``; or naming the argument at fault.
     """
     path = Path(path)
+    _check_argument_types(
+        sensor=sensor,
+        stream=stream,
+        glob=glob,
+        time_column=time_column,
+        trial_column=trial_column,
+        channels=channels,
+        label_columns=label_columns,
+        group_columns=group_columns,
+        class_labels=class_labels,
+        units=units,
+    )
+    delimiter, decimal, encoding = _text_options(delimiter, decimal, encoding)
+    # Hydra reads a column named 5 as the number 5; the header's names are text
+    time_column = None if time_column is None else str(time_column)
+    trial_column = None if trial_column is None else str(trial_column)
     roles = _Roles(time_column, trial_column, label_columns, group_columns)
     classes = {
         str(k): tuple(str(c) for c in v) for k, v in (class_labels or {}).items()
@@ -383,7 +505,13 @@ def read_csv_dataset(
     where: dict[str, tuple[Path, int]] = {}
     steps: list[np.ndarray] = []
     for file in files:
-        df = read_csv_file(file)
+        df = read_csv_file(
+            file,
+            delimiter=delimiter,
+            decimal=decimal,
+            encoding=encoding,
+            delimiter_option="source.delimiter",
+        )
         if df.empty:
             raise SourceFormatError(f"{file}: has a header but no data rows")
         df.columns = [str(c) for c in df.columns]
@@ -537,6 +665,9 @@ def read_csv_dataset(
                 for f in files
             ],
             "options": {
+                "delimiter": delimiter,
+                "decimal": decimal,
+                "encoding": encoding,
                 "time_column": time_column,
                 "rate_hz": rate_hz,
                 "trial_column": trial_column,
@@ -546,6 +677,84 @@ def read_csv_dataset(
         },
         name=path.stem if path.is_file() else path.resolve().name,
     )
+
+
+def _is_names(value: Any) -> bool:
+    return isinstance(value, list | tuple) and all(
+        isinstance(v, str | int) and not isinstance(v, bool) and str(v) for v in value
+    )
+
+
+def _check_argument_types(**given: Any) -> None:
+    """Refuse an argument of the wrong kind, naming it (a text where a list belongs would
+    otherwise be read letter by letter: ``label_columns='slip'`` as columns s, l, i, p)."""
+    expected = {
+        "sensor": ("a non-empty name", lambda v: isinstance(v, str) and v.strip()),
+        "stream": ("a non-empty name", lambda v: isinstance(v, str) and v.strip()),
+        "glob": (
+            "a non-empty file pattern such as '*.csv'",
+            lambda v: isinstance(v, str) and v,
+        ),
+        "time_column": ("a column name or null", lambda v: v is None or _is_names([v])),
+        "trial_column": (
+            "a column name or null",
+            lambda v: v is None or _is_names([v]),
+        ),
+        "channels": (
+            "a list of column names such as [fx, fy] or null",
+            lambda v: v is None or _is_names(v),
+        ),
+        "label_columns": (
+            "a list of column names such as [slip_onset_s] (or [])",
+            _is_names,
+        ),
+        "group_columns": ("a list of column names such as [object] (or [])", _is_names),
+        "class_labels": (
+            "a mapping {label: [class, ...]} or null",
+            lambda v: (
+                v is None
+                or (isinstance(v, Mapping) and all(_is_names(c) for c in v.values()))
+            ),
+        ),
+        "units": (
+            "one unit such as N, a mapping {channel: unit}, or null",
+            lambda v: v is None or isinstance(v, str | Mapping),
+        ),
+    }
+    for name, value in given.items():
+        text, ok = expected[name]
+        if not ok(value):
+            shown = "null" if value is None else repr(value)
+            raise SourceFormatError(f"{name}={shown}: expected {text}")
+
+
+def _text_options(delimiter: Any, decimal: Any, encoding: Any) -> tuple[str, str, str]:
+    """The CSV text options checked: one-character delimiter and decimal mark, a known encoding."""
+    if delimiter in ("\\t", "tab"):
+        delimiter = "\t"
+    if not (
+        isinstance(delimiter, str)
+        and len(delimiter) == 1
+        and delimiter not in "\r\n\"'"
+    ):
+        raise SourceFormatError(
+            f"delimiter={delimiter!r}: expected one character such as ',' ';' '|' or '\\t'"
+        )
+    if not (isinstance(decimal, str) and len(decimal) == 1 and decimal not in "\r\n"):
+        raise SourceFormatError(
+            f"decimal={decimal!r}: expected one character, '.' or ','"
+        )
+    if decimal == delimiter:
+        raise SourceFormatError(
+            f"decimal={decimal!r}: the same character as delimiter; give another one"
+        )
+    try:
+        codecs.lookup(str(encoding))
+    except LookupError:
+        raise SourceFormatError(
+            f"encoding={encoding!r}: unknown text encoding; e.g. utf-8, latin-1, cp1252"
+        ) from None
+    return delimiter, decimal, str(encoding)
 
 
 def _units(
