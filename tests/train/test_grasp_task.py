@@ -9,14 +9,17 @@ import numpy as np
 import pandas as pd
 import pytest
 from hydra import compose, initialize_config_dir
+from sklearn.compose import ColumnTransformer
 from sklearn.linear_model import LogisticRegression
+from sklearn.pipeline import Pipeline, make_pipeline
 from sklearn.svm import SVC
 
 import slipkit
 from slipkit.data.dataset import Dataset
 from slipkit.data.importers.bts3v2 import CHANNELS, ORIENTATIONS, read_bts3v2
+from slipkit.data.io import save_dataset
 from slipkit.errors import SlipkitError
-from slipkit.train.commands import train_main
+from slipkit.train.commands import evaluate_main, train_main
 from slipkit.train.tasks.grasp import GraspFeatures, GraspStability
 
 #: Per-orientation electrode baselines (counts): the shift the task must cope with.
@@ -96,10 +99,36 @@ def test_grasp_split_keeps_objects_apart_and_reports_the_controls(
     assert [
         "none",
         "per_grasp",
+        "shape",
         "orientation_feature",
         "per_orientation",
     ] == list(m["normalisation_at_best"])
     assert {"scores.csv", "normalisation.csv"} <= {p.name for p in tmp_path.iterdir()}
+
+
+def test_grasp_report_puts_the_controls_beside_each_orientation(
+    synthetic: Dataset, tmp_path: Path
+) -> None:
+    """Test scores, majority, orientation-only and plain logistic regression, per orientation."""
+    m = _task().fit(LogisticRegression(), synthetic, seed=0, out=tmp_path).metrics
+    controls = m["controls_test"]
+    assert {"majority", "orientation_only", "plain_logreg"} == set(controls)
+    for scored in (m["test"], *controls.values()):
+        assert set(ORIENTATIONS) == set(scored["per_orientation"])
+    # a constant answer per orientation is at chance in every orientation
+    assert [0.5, 0.5, 0.5] == [
+        controls["orientation_only"]["per_orientation"][o]["balanced_accuracy"]
+        for o in ORIENTATIONS
+    ]
+    assert (
+        controls["plain_logreg"]["balanced_accuracy"] > 0.9
+    )  # the synthetic rule is easy
+    table = pd.read_csv(tmp_path / "scores.csv")
+    assert 16 == len(table)  # 4 scored x (all + 3 orientations)
+    assert {"test", "majority", "orientation_only", "plain_logreg"} == set(
+        table["scored"]
+    )
+    assert set(ORIENTATIONS) == set(m["validation"]["per_orientation"])
 
 
 def test_grasp_test_labels_cannot_change_the_selection_or_the_objective(
@@ -134,6 +163,82 @@ def test_per_orientation_features_remove_the_orientation_baseline(
     assert (len(X), 75) == with_o.shape
 
 
+def write_orientation_trap(folder: Path, n_objects: int = 12, seed: int = 0) -> Path:
+    """BTS3v2 layout where electrodes 0-5 decide stability when the palm is down or at
+    45 deg but are noise with the palm to the side; electrodes 30-35 are a noisier
+    (75 %) cue in every orientation; one baseline for all orientations."""
+    rng = np.random.default_rng(seed)
+    folder.mkdir()
+    for orientation in ORIENTATIONS:
+        rows = []
+        for k in range(n_objects):
+            for _ in range(20):
+                e = 2800.0 + rng.normal(0.0, 30.0, 72)
+                slipped = int(rng.random() < 0.5)
+                if orientation != "palm_side":
+                    e[0:6] -= 0.0 if slipped else 150.0
+                cue = slipped if rng.random() < 0.75 else 1 - slipped
+                e[30:36] -= 0.0 if cue else 150.0
+                rows.append([f"obj{k}", slipped, *e.round(0)])
+        pd.DataFrame(rows, columns=["object", "slipped", *CHANNELS]).to_csv(
+            folder / f"bts3v2_{orientation}.csv", index=False
+        )
+    return folder
+
+
+def _only(columns: list[int]) -> Pipeline:
+    """Logistic regression on some electrode columns only."""
+    return make_pipeline(
+        ColumnTransformer([("pick", "passthrough", columns)]), LogisticRegression()
+    )
+
+
+def test_worst_orientation_selection_never_picks_a_model_that_fails_one_orientation(
+    tmp_path: Path,
+) -> None:
+    """Pooled scoring picks the cue that is chance with the palm side; worst-orientation does not."""
+    trap = read_bts3v2(write_orientation_trap(tmp_path / "bts"))
+    chosen = {}
+    for scoring in ("balanced_accuracy", "worst_orientation_balanced_accuracy"):
+        task = GraspStability(
+            model_name="sharp",
+            candidates={"steady": _only(list(range(30, 36)))},
+            spaces={},
+            cv=3,
+            scoring=scoring,
+        )
+        m = task.fit(_only(list(range(6))), trap, seed=0, out=tmp_path).metrics
+        chosen[scoring] = m["selection"]["best"]["model"]
+    assert {
+        "balanced_accuracy": "sharp",
+        "worst_orientation_balanced_accuracy": "steady",
+    } == chosen
+
+
+def test_grasp_task_refuses_an_unknown_scoring(
+    synthetic: Dataset, tmp_path: Path
+) -> None:
+    """An unknown task.scoring is refused in one line naming the option and the value."""
+    with pytest.raises(SlipkitError, match=r"task\.scoring: unknown scorer 'worst'"):
+        _task(scoring="worst").fit(
+            LogisticRegression(), synthetic, seed=0, out=tmp_path
+        )
+
+
+def test_shape_features_ignore_a_pad_offset_and_gain(synthetic: Dataset) -> None:
+    """shape gives the same features when a finger pad's readings are shifted and scaled."""
+    X, _, _ = GraspStability().arrays(synthetic)
+    moved = X.copy()
+    for finger, (gain, offset) in enumerate([(1.3, 250.0), (0.8, -400.0), (1.0, 90.0)]):
+        pad = slice(24 * finger, 24 * (finger + 1))
+        moved[:, pad] = gain * moved[:, pad] + offset
+    features = GraspFeatures(normalise="shape").fit(X)
+    # equal up to SHAPE_EPS (1 count^2 beside a pad variance of ~900 counts^2 here)
+    assert np.allclose(features.transform(X), features.transform(moved), atol=5e-3)
+    raw = GraspFeatures(normalise="none").fit(X)
+    assert not np.allclose(raw.transform(X), raw.transform(moved), atol=5e-3)
+
+
 def test_grasp_task_names_a_missing_column(synthetic: Dataset, tmp_path: Path) -> None:
     """A group column the dataset lacks is refused, naming it."""
     with pytest.raises(SlipkitError, match="'grip'"):
@@ -159,15 +264,34 @@ def test_train_bts3v2_stability_end_to_end_on_a_synthetic_recording(
                 f"run_dir={run}",
                 "task.n_trials=1",
                 "task.cv=2",
-                "task.candidates.mlp.max_iter=20",
+                "model.max_iter=20",
             ],
         )
     objective = train_main(cfg)
     info = json.loads((run / "run.json").read_text())
     metrics = json.loads((run / "metrics.json").read_text())
-    assert "validation.balanced_accuracy" == info["objective"]["name"]
-    assert metrics["validation"]["balanced_accuracy"] == objective
-    assert {"logreg", "svm", "mlp"} == set(metrics["selection"]["by_model"])
+    assert "validation.worst_orientation_balanced_accuracy" == info["objective"]["name"]
+    assert metrics["validation"]["worst_orientation_balanced_accuracy"] == objective
+    assert {"mlp"} == set(metrics["selection"]["by_model"])
+    assert metrics["params"]["normalise"] in {"per_grasp", "shape"}
+    assert 2 == len(metrics["split"]["test_objects"])  # 24 % of 8 objects
+    # slipkit evaluate on a recording of other objects: overall, per orientation, worst
+    other = write_synthetic_bts3v2(tmp_path / "other_raw", n_objects=3, seed=5)
+    folder = save_dataset(read_bts3v2(other), tmp_path / "other")
+    with initialize_config_dir(
+        config_dir=str(slipkit.config_dir()), version_base="1.3"
+    ):
+        ecfg = compose(
+            config_name="evaluate",
+            overrides=[f"run={run}", f"dataset={folder}", "name=other"],
+        )
+    scores = json.loads(evaluate_main(ecfg).read_text())["test"]
+    assert 90 == scores["n"]
+    assert set(ORIENTATIONS) == set(scores["per_orientation"])
+    assert (
+        min(m["balanced_accuracy"] for m in scores["per_orientation"].values())
+        == scores["worst_orientation_balanced_accuracy"]
+    )
 
 
 @pytest.mark.realdata
@@ -188,7 +312,7 @@ def test_bts3v2_on_the_real_recordings_beats_75_percent(
 
 
 @pytest.mark.parametrize(
-    "mode", ["none", "per_grasp", "orientation_feature", "per_orientation"]
+    "mode", ["none", "per_grasp", "shape", "orientation_feature", "per_orientation"]
 )
 def test_grasp_pipeline_exports_to_onnx_with_parity(
     synthetic: Dataset, mode: str

@@ -22,7 +22,7 @@ from __future__ import annotations
 import logging
 import sys
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -168,6 +168,7 @@ def optuna_search(
     seed: int = 0,
     unit: str = "trial",
     label: str = "search",
+    scorer: Callable[[Any, np.ndarray, np.ndarray], float] | None = None,
 ) -> tuple[dict[str, Any], float, list[dict[str, Any]]]:
     """Search ``space`` with Optuna TPE; return (best params, best CV score, history).
 
@@ -190,6 +191,9 @@ def optuna_search(
         What one group is (``trial``, ``object``): for messages and the record.
     label : str
         What is searched, shown in the progress lines on stderr.
+    scorer : callable, optional
+        ``scorer(estimator, X, y)`` used instead of the scikit-learn scorer named
+        ``scoring`` (which then only names it in messages and records).
 
     Returns
     -------
@@ -214,7 +218,12 @@ def optuna_search(
         params = {name: _suggest(trial, name, spec) for name, spec in space.items()}
         model = clone(estimator).set_params(**params)
         scores = cross_val_score(
-            model, X, y, groups=groups, cv=splitter, scoring=scoring
+            model,
+            X,
+            y,
+            groups=groups,
+            cv=splitter,
+            scoring=scoring if scorer is None else scorer,
         )
         trial.set_user_attr("std", float(np.std(scores)))
         trial.set_user_attr("folds", [float(s) for s in scores])

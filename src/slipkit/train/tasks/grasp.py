@@ -10,20 +10,25 @@ classifies stable vs slipped from that snapshot:
 * **Selection on the training objects only.** Each candidate family (logistic
   regression, RBF SVM, MLP: scikit-learn) gets an Optuna TPE search of its
   hyper-parameters and of the orientation handling (:class:`GraspFeatures`), scored by
-  ``GroupKFold`` by object over the training objects. The family with the best
+  ``GroupKFold`` by object over the training objects. With
+  ``scoring: worst_orientation_balanced_accuracy`` a candidate's score is, per fold,
+  the balanced accuracy of its worst palm orientation (averaged over the folds), so a
+  model that fails one orientation is not chosen. The family with the best
   validation score is refitted on all training objects; the test objects are scored
   once, after. The run's objective is that validation score.
-* **Report.** Accuracy, balanced accuracy, per-class recall, the majority-class
-  control (the training side's most frequent class, always), and the same per palm
-  orientation.
+* **Report.** Accuracy, balanced accuracy, per-class recall, overall and per palm
+  orientation, for the chosen model and three controls fitted on the training objects:
+  the majority class, the orientation alone (each orientation's majority class) and a
+  plain standardised logistic regression on the raw electrodes.
 
 The palm orientation shifts the electrode baseline (gravity loads the finger pads
-differently), so :class:`GraspFeatures` offers four ways to cope, searched like any
+differently), so :class:`GraspFeatures` offers five ways to cope, searched like any
 hyper-parameter: ``none`` (raw electrodes), ``per_grasp`` (each finger's mean over
-its 24 electrodes subtracted, i.e. the common offset of a pad removed),
-``orientation_feature`` (a one-hot orientation beside the electrodes) and
-``per_orientation`` (electrodes standardised with their orientation's training
-mean and standard deviation).
+its 24 electrodes subtracted, i.e. the common offset of a pad removed), ``shape``
+(``per_grasp``, then divided by that finger's spread over its 24 electrodes: the
+pressure pattern of a pad, blind to its offset and gain), ``orientation_feature`` (a
+one-hot orientation beside the electrodes) and ``per_orientation`` (electrodes
+standardised with their orientation's training mean and standard deviation).
 """
 
 from __future__ import annotations
@@ -36,6 +41,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 from sklearn.base import BaseEstimator, TransformerMixin, clone
+from sklearn.linear_model import LogisticRegression
+from sklearn.metrics import balanced_accuracy_score, get_scorer_names
+from sklearn.model_selection import GroupKFold, cross_validate
 from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
 from sklearn.utils.validation import check_is_fitted, validate_data
@@ -44,13 +52,19 @@ from slipkit.data.dataset import Dataset
 from slipkit.data.splits import split_by_group
 from slipkit.errors import SlipkitError
 from slipkit.evaluate.metrics import classification_metrics
-from slipkit.train.search import format_best, group_cv, optuna_search, selection_record
+from slipkit.train.search import format_best, optuna_search, selection_record
 from slipkit.train.task import Task, TaskResult
 
 log = logging.getLogger("slipkit.grasp")
 
 #: Orientation handling of :class:`GraspFeatures`.
-NORMALISE = ("none", "per_grasp", "orientation_feature", "per_orientation")
+NORMALISE = ("none", "per_grasp", "shape", "orientation_feature", "per_orientation")
+#: Selection scoring of :class:`GraspStability`: the worst orientation's balanced accuracy.
+WORST_ORIENTATION = "worst_orientation_balanced_accuracy"
+#: Added to a pad's variance (counts^2) in ``shape``: a pad whose 24 electrodes read
+#: alike stays finite (its pattern becomes 0); electrode counts are integers, so a
+#: spread of 1 count is below anything a contact makes.
+SHAPE_EPS = 1.0
 
 
 class GraspFeatures(TransformerMixin, BaseEstimator):
@@ -59,17 +73,18 @@ class GraspFeatures(TransformerMixin, BaseEstimator):
     Input columns: ``n_electrodes`` electrode values (counts), then one 0/1 column per
     orientation (the task appends them). With ``E`` the electrodes and ``O`` the one-hot
     columns, every mode is one formula, ``Z = (E @ W - O @ M) / (O @ S)``, plus ``O``
-    appended for ``orientation_feature``, so its ONNX graph is a handful of MatMul / Sub /
-    Div nodes.
+    appended for ``orientation_feature``; ``shape`` then divides by each pad's spread,
+    ``Z / sqrt((Z * Z) @ P + eps)``. Its ONNX graph is a handful of MatMul / Sub / Div
+    (/ Mul / Sqrt) nodes.
 
     Parameters
     ----------
-    normalise : {"none", "per_grasp", "orientation_feature", "per_orientation"}
+    normalise : {"none", "per_grasp", "shape", "orientation_feature", "per_orientation"}
         See the module docstring.
     n_electrodes : int
         Electrode columns (BTS3v2: 72, three fingers of 24).
     n_fingers : int
-        Sensors whose electrodes are consecutive blocks (for ``per_grasp``).
+        Sensors whose electrodes are consecutive blocks (for ``per_grasp``, ``shape``).
 
     Attributes
     ----------
@@ -77,6 +92,8 @@ class GraspFeatures(TransformerMixin, BaseEstimator):
         Linear map of the electrodes (identity, or per-finger mean removal).
     M_, S_ : ndarray of shape (n_orientations, n_electrodes)
         Per-orientation offset and scale (0 and 1 except for ``per_orientation``).
+    P_ : ndarray of shape (n_electrodes, n_electrodes) or None
+        ``shape``: the per-finger averaging matrix (a pad's mean square, per electrode).
     """
 
     def __init__(
@@ -104,12 +121,15 @@ class GraspFeatures(TransformerMixin, BaseEstimator):
         self.W_ = np.eye(n_e)
         self.M_ = np.zeros((n_o, n_e))
         self.S_ = np.ones((n_o, n_e))
-        if self.normalise == "per_grasp":
+        self.P_: np.ndarray | None = None
+        if self.normalise in ("per_grasp", "shape"):
             size = n_e // int(self.n_fingers)
             block = np.kron(
                 np.eye(int(self.n_fingers)), np.full((size, size), 1 / size)
             )
             self.W_ = np.eye(n_e) - block
+            if self.normalise == "shape":
+                self.P_ = block
         elif self.normalise == "per_orientation":
             for k in range(n_o):
                 rows = onehot[:, k] > 0.5
@@ -129,6 +149,8 @@ class GraspFeatures(TransformerMixin, BaseEstimator):
         # A row without an orientation keeps offset 0 and scale 1.
         scale = onehot @ self.S_ + (1.0 - onehot.sum(axis=1, keepdims=True))
         Z = (E @ self.W_ - onehot @ self.M_) / scale
+        if self.P_ is not None:
+            Z = Z / np.sqrt((Z * Z) @ self.P_ + SHAPE_EPS)
         if self.normalise == "orientation_feature":
             Z = np.hstack([Z, onehot])
         return np.asarray(Z)
@@ -146,7 +168,8 @@ def _onnx_shape(operator: Any) -> None:
 
 
 def _onnx_convert(scope: Any, operator: Any, container: Any) -> None:
-    """skl2onnx converter: ``(E @ W - O @ M) / (O @ S + 1 - sum(O))`` [, O]."""
+    """skl2onnx converter: ``(E @ W - O @ M) / (O @ S + 1 - sum(O))`` [, O]
+    (``shape``: divided by ``sqrt((Z * Z) @ P + eps)``)."""
     from onnx import TensorProto
 
     op = operator.raw_operator
@@ -208,6 +231,29 @@ def _onnx_convert(scope: Any, operator: Any, container: Any) -> None:
         "scale",
     )
     z = node("Div", [num, scale], "Z")
+    if op.P_ is not None:  # shape: Z / sqrt((Z * Z) @ P + eps)
+        spread = node(
+            "Sqrt",
+            [
+                node(
+                    "Add",
+                    [
+                        node(
+                            "MatMul",
+                            [
+                                node("Mul", [z, z], "Z2"),
+                                const("P", op.P_.astype(np.float32)),
+                            ],
+                            "Z2P",
+                        ),
+                        const("eps", np.array([SHAPE_EPS], dtype=np.float32)),
+                    ],
+                    "var",
+                )
+            ],
+            "spread",
+        )
+        z = node("Div", [z, spread], "Zs")
     out = operator.outputs[0].full_name
     if op.normalise == "orientation_feature":
         container.add_node(
@@ -250,6 +296,31 @@ def grasp_pipeline(classifier: Any, *, n_electrodes: int = 72) -> Pipeline:
     )
 
 
+class OrientationScorer:
+    """Scikit-learn scorer ``(estimator, X, y) -> float`` on the grasp task's ``X``
+    (electrodes, then one 0/1 column per orientation): the balanced accuracy of one
+    orientation's rows (``column``), or of the worst orientation (``column=None``).
+
+    The orientation is read from ``X`` itself, so the scorer works inside
+    ``cross_val_score`` / ``cross_validate`` folds without a side channel.
+    """
+
+    def __init__(self, n_electrodes: int, column: int | None = None) -> None:
+        self.n_electrodes = n_electrodes
+        self.column = column
+
+    def __call__(self, estimator: Any, X: np.ndarray, y: np.ndarray) -> float:
+        onehot = np.asarray(X)[:, int(self.n_electrodes) :] > 0.5
+        pred = np.asarray(estimator.predict(X))
+        columns = range(onehot.shape[1]) if self.column is None else [self.column]
+        scores = [
+            float(balanced_accuracy_score(y[onehot[:, k]], pred[onehot[:, k]]))
+            for k in columns
+            if onehot[:, k].any()
+        ]
+        return min(scores) if scores else float("nan")
+
+
 def _pipeline_space(space: Mapping[str, Any]) -> dict[str, Any]:
     """``normalise`` -> ``prep__normalise``; every other name -> ``clf__<name>``."""
     return {
@@ -285,7 +356,9 @@ class GraspStability(Task):
     cv : int
         Folds of the group CV by object on the training side.
     scoring : str
-        Scikit-learn scorer of selection; objective ``validation.<scoring>``.
+        Selection scorer: a scikit-learn scorer name, or
+        ``worst_orientation_balanced_accuracy`` (per fold, the balanced accuracy of
+        the worst palm orientation). Objective ``validation.<scoring>``.
     n_trials : int
         Optuna candidates per model family.
     model_name : str
@@ -332,6 +405,18 @@ class GraspStability(Task):
         self.candidates = candidates
         self.spaces = spaces
         self.objective = f"validation.{scoring}"
+
+    def _scorer(self, n_e: int) -> OrientationScorer | None:
+        """The callable behind ``scoring`` (None: a scikit-learn scorer name)."""
+        if str(self.scoring) == WORST_ORIENTATION:
+            return OrientationScorer(n_e)
+        if str(self.scoring) not in get_scorer_names():
+            raise SlipkitError(
+                f"task.scoring: unknown scorer {self.scoring!r}; use "
+                f"{WORST_ORIENTATION!r} or a scikit-learn scorer name "
+                "(balanced_accuracy, accuracy, f1_macro, ...)"
+            )
+        return None
 
     # -- data -------------------------------------------------------------------------
     def arrays(self, dataset: Dataset) -> tuple[np.ndarray, np.ndarray, pd.DataFrame]:
@@ -410,17 +495,92 @@ class GraspStability(Task):
         self, model: Any, X: np.ndarray, y: np.ndarray, trials: pd.DataFrame
     ) -> dict[str, Any]:
         """Classification metrics overall and per orientation."""
-        pred = np.asarray(model.predict(X)).astype(str)
+        return self._scores(np.asarray(model.predict(X)).astype(str), y, trials)
+
+    def _scores(
+        self, pred: np.ndarray, y: np.ndarray, trials: pd.DataFrame
+    ) -> dict[str, Any]:
+        """Metrics of ``pred`` overall, per orientation and of the worst orientation."""
         labels = [str(c) for c in self.classes]
         out = classification_metrics(y, pred, labels)
         if self.orientation is not None:
             ori = trials[self.orientation].astype(str).to_numpy()
-            out["per_orientation"] = {
+            per = {
                 str(o): classification_metrics(y[ori == o], pred[ori == o], labels)
                 for o in self.orientations
                 if (ori == o).any()
             }
+            out["per_orientation"] = per
+            out[WORST_ORIENTATION] = min(m["balanced_accuracy"] for m in per.values())
+        else:
+            out[WORST_ORIENTATION] = out["balanced_accuracy"]
         return out
+
+    def _controls(
+        self,
+        X: np.ndarray,
+        y: np.ndarray,
+        tr: np.ndarray,
+        te: np.ndarray,
+        trials: pd.DataFrame,
+        n_e: int,
+    ) -> dict[str, Any]:
+        """Controls fitted on the training grasps, scored on the test grasps: the
+        majority class, the orientation alone (each orientation's training majority)
+        and a plain standardised logistic regression on the raw electrodes."""
+        t_trials = trials[te].reset_index(drop=True)
+        vals, counts = np.unique(y[tr], return_counts=True)
+        majority = str(vals[np.argmax(counts)])
+        by_orientation = np.full(int(te.sum()), majority, dtype=object)
+        onehot_tr, onehot_te = X[tr, n_e:] > 0.5, X[te, n_e:] > 0.5
+        for k in range(onehot_tr.shape[1]):
+            if onehot_tr[:, k].any():
+                v, c = np.unique(y[tr][onehot_tr[:, k]], return_counts=True)
+                by_orientation[onehot_te[:, k]] = str(v[np.argmax(c)])
+        plain = Pipeline(
+            [
+                ("scale", StandardScaler()),
+                ("clf", LogisticRegression(max_iter=5000)),
+            ]
+        ).fit(X[tr, :n_e], y[tr])
+        return {
+            "majority": {
+                "class": majority,
+                **self._scores(np.full(int(te.sum()), majority), y[te], t_trials),
+            },
+            "orientation_only": self._scores(
+                by_orientation.astype(str), y[te], t_trials
+            ),
+            "plain_logreg": self._scores(
+                np.asarray(plain.predict(X[te, :n_e])).astype(str), y[te], t_trials
+            ),
+        }
+
+    def _validation_table(
+        self, pipe: Pipeline, X: np.ndarray, y: np.ndarray, groups: np.ndarray, n_e: int
+    ) -> dict[str, Any]:
+        """``pipe`` scored by the same group CV (training objects only): the selection
+        scoring, balanced accuracy, and balanced accuracy per orientation."""
+        scoring: dict[str, Any] = {
+            "selection": self._scorer(n_e) or str(self.scoring),
+            "balanced_accuracy": "balanced_accuracy",
+        }
+        names = [str(o) for o in self.orientations] if self.orientation else []
+        for k, o in enumerate(names):
+            scoring[f"orientation {o}"] = OrientationScorer(n_e, k)
+        res = cross_validate(
+            pipe, X, y, groups=groups, cv=GroupKFold(int(self.cv)), scoring=scoring
+        )
+        sel = np.asarray(res["test_selection"], dtype=float)
+        return {
+            str(self.scoring): float(np.mean(sel)),
+            "std": float(np.std(sel)),
+            "folds": [float(v) for v in sel],
+            "balanced_accuracy": float(np.mean(res["test_balanced_accuracy"])),
+            "per_orientation": {
+                o: float(np.nanmean(res[f"test_orientation {o}"])) for o in names
+            },
+        }
 
     def _majority(
         self, cls: str, y: np.ndarray, trials: pd.DataFrame
@@ -458,6 +618,7 @@ class GraspStability(Task):
             te.sum(),
             len(set(groups[te])),
         )
+        scorer = self._scorer(n_e)
         # Selection: training objects only; the test objects are not touched here.
         records: dict[str, dict[str, Any]] = {}
         pipelines: dict[str, Pipeline] = {}
@@ -479,6 +640,7 @@ class GraspStability(Task):
                 seed=seed,
                 unit="object",
                 label=f"grasp {name} ({type(clf).__name__}) search",
+                scorer=scorer,
             )
             records[name] = selection_record(
                 _plain(best),
@@ -509,15 +671,12 @@ class GraspStability(Task):
         # Which orientation handling helps, measured on validation: the chosen model
         # and hyper-parameters with each mode, same group CV (training objects only).
         at_best = {
-            mode: group_cv(
+            mode: self._validation_table(
                 clone(pipelines[chosen]).set_params(prep__normalise=mode),
                 X[tr],
                 y[tr],
                 groups[tr],
-                cv=int(self.cv),
-                scoring=str(self.scoring),
-                unit="object",
-                label=f"grasp {chosen} with normalise={mode}",
+                n_e,
             )
             for mode in NORMALISE
         }
@@ -530,6 +689,11 @@ class GraspStability(Task):
             str(self.scoring): records[chosen]["best_score"],
             "std": best_row["std"],
             "source": "selection (best candidate of the chosen model)",
+            # The chosen candidate re-scored by the same folds, per orientation.
+            **{
+                k: at_best[str(pipelines[chosen].get_params()["prep__normalise"])][k]
+                for k in ("balanced_accuracy", "per_orientation")
+            },
         }
         # The test objects, scored once with the chosen model.
         vals, counts = np.unique(y[tr], return_counts=True)
@@ -549,17 +713,11 @@ class GraspStability(Task):
             "validation": validation,
             "orientation_baseline_counts": self._baselines(X[tr], n_e),
             "normalisation": _normalisation_table(records),
-            "normalisation_at_best": {
-                mode: {
-                    str(self.scoring): v[str(self.scoring)],
-                    "std": v["std"],
-                    "folds": v["folds"],
-                }
-                for mode, v in at_best.items()
-            },
+            "normalisation_at_best": at_best,
             "train": self.score(final, X[tr], y[tr], trials[tr].reset_index(drop=True)),
             "test": self.score(final, X[te], y[te], t_trials),
             "majority_control_test": self._majority(majority_cls, y[te], t_trials),
+            "controls_test": self._controls(X, y, tr, te, trials, n_e),
         }
         _write_tables(metrics, out)
         return TaskResult(final, metrics, _summary(metrics))
@@ -586,31 +744,39 @@ def _normalisation_table(records: Mapping[str, Mapping[str, Any]]) -> dict[str, 
     return table
 
 
+#: Rows of the per-orientation tables: (metrics key, label).
+_ROWS = (
+    ("test", "chosen model"),
+    ("plain_logreg", "plain logistic regression"),
+    ("orientation_only", "orientation only"),
+    ("majority", "majority class"),
+)
+
+
+def _scored(metrics: Mapping[str, Any]) -> list[tuple[str, str, Mapping[str, Any]]]:
+    """(key, label, metrics) of the chosen model and each control on the test objects."""
+    controls = metrics["controls_test"]
+    return [
+        (key, label, metrics["test"] if key == "test" else controls[key])
+        for key, label in _ROWS
+    ]
+
+
 def _write_tables(metrics: Mapping[str, Any], out: Path) -> None:
     rows = []
-    for part, m in (
-        ("test", metrics["test"]),
-        ("majority", metrics["majority_control_test"]),
-    ):
-        rows.append(
-            {
-                "scored": part,
-                "orientation": "all",
-                "accuracy": m["accuracy"],
-                "balanced_accuracy": m["balanced_accuracy"],
-                **{f"recall_{k}": v for k, v in m["recall"].items()},
-            }
-        )
-    for o, m in metrics["test"].get("per_orientation", {}).items():
-        rows.append(
-            {
-                "scored": "test",
-                "orientation": o,
-                "accuracy": m["accuracy"],
-                "balanced_accuracy": m["balanced_accuracy"],
-                **{f"recall_{k}": v for k, v in m["recall"].items()},
-            }
-        )
+    for key, _, m in _scored(metrics):
+        parts = [("all", m), *m.get("per_orientation", {}).items()]
+        for o, mo in parts:
+            rows.append(
+                {
+                    "scored": key,
+                    "orientation": o,
+                    "n": mo["n"],
+                    "accuracy": mo["accuracy"],
+                    "balanced_accuracy": mo["balanced_accuracy"],
+                    **{f"recall_{k}": v for k, v in mo["recall"].items()},
+                }
+            )
     pd.DataFrame(rows).to_csv(out / "scores.csv", index=False)
     pd.DataFrame(metrics["normalisation"]).to_csv(out / "normalisation.csv")
 
@@ -618,6 +784,7 @@ def _write_tables(metrics: Mapping[str, Any], out: Path) -> None:
 def _summary(metrics: Mapping[str, Any]) -> list[str]:
     sp, te, maj = metrics["split"], metrics["test"], metrics["majority_control_test"]
     val = metrics["validation"]
+    orientations = list(te.get("per_orientation", {}))
     lines = [
         f"Grasp stability, split by {sp['by']}: {len(sp['train_objects'])} train objects "
         f"({sp['n_train']} grasps) / {len(sp['test_objects'])} held-out objects "
@@ -630,12 +797,24 @@ def _summary(metrics: Mapping[str, Any]) -> list[str]:
         + ", ".join(f"{k} {v:.3f}" for k, v in te["recall"].items()),
         f"  majority control (always {maj['class']!r}): accuracy {maj['accuracy']:.4f}, "
         f"balanced {maj['balanced_accuracy']:.4f}",
+        "  accuracy / balanced accuracy    "
+        + "".join(f"{o:>16}" for o in ["all", *orientations]),
     ]
-    for o, m in te.get("per_orientation", {}).items():
+    for _, label, m in _scored(metrics):
+        cells = [m, *(m["per_orientation"][o] for o in orientations)]
         lines.append(
-            f"    {o:<10} n={m['n']:<5} accuracy {m['accuracy']:.4f}, balanced "
-            f"{m['balanced_accuracy']:.4f} (majority "
-            f"{maj['per_orientation'][o]:.4f})"
+            f"    {label:<30}"
+            + "".join(
+                f"   {c['accuracy']:.3f} / {c['balanced_accuracy']:.3f}" for c in cells
+            )
+        )
+    if orientations:
+        lines.append(
+            f"    {'validation (training objects)':<30}   {'- / ':>8}"
+            f"{val['balanced_accuracy']:.3f}"
+            + "".join(
+                f"   {'- / ':>8}{val['per_orientation'][o]:.3f}" for o in orientations
+            )
         )
     for o, b in metrics["orientation_baseline_counts"].items():
         lines.append(
@@ -665,7 +844,9 @@ def _summary(metrics: Mapping[str, Any]) -> list[str]:
 
 __all__: Sequence[str] = [
     "NORMALISE",
+    "WORST_ORIENTATION",
     "GraspFeatures",
     "GraspStability",
+    "OrientationScorer",
     "grasp_pipeline",
 ]
