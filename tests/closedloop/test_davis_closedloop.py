@@ -218,6 +218,19 @@ def test_a_detector_reading_another_frame_is_refused() -> None:
     )
 
 
+def test_an_effect_the_loop_cannot_evaluate_is_refused_by_name() -> None:
+    """A scene effect other than the DAVIS event effects is a one-line error naming it."""
+    scenario, scene, plant = _setup("+scene.effects.timestamp_jitter={}")
+    with pytest.raises(SlipkitError) as err:
+        scenario.run_trial(
+            scene, _Frames(), plant, seed=0, condition_index=0, trial=0, condition=SLOW
+        )
+    assert str(err.value).startswith(
+        "configs/scene/davis_release.yaml effects ['timestamp_jitter']: the DAVIS "
+        "closed loop cannot evaluate them from the plant"
+    )
+
+
 def test_bad_plant_parameter_is_refused_by_name() -> None:
     """area_loss above 1 is a one-line error naming the field."""
     with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
