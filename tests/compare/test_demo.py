@@ -142,7 +142,7 @@ def test_closedloop_plan_maps_scenarios_to_compared_families() -> None:
     with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
         cfg = compose(config_name="demo", overrides=["quick=true"])
         plan = closedloop_plan(cfg, ["tactip", "davis"])
-    assert ["tactip"] == list(plan)
+    assert ["davis", "tactip"] == list(plan)
     family, overrides = plan["tactip"]
     assert "tactip" == family
     assert {"closedloop=tactip", "seeds=[0]", "trials_per_speed=1"} <= set(overrides)
