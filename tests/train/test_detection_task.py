@@ -102,7 +102,10 @@ def test_fsr_roc_trains_and_evaluates(
     assert "paper 8" in printed
     assert (run / "roc.png").stat().st_size > 0
     metrics = json.loads((run / "metrics.json").read_text())
-    assert "event ROC (Youden)" == metrics["threshold_from"]
+    assert (
+        "lowest cost on validation: group k-fold by trial, k=2"
+        == metrics["threshold_from"]
+    )
     assert 0 == metrics["test"]["disturbances"]["fired"]
     from slipkit.train.runs import read_run
 

@@ -171,6 +171,81 @@ def parse_limits(node: Mapping[str, Any], where: str) -> Limits:
     return Limits(**kw)
 
 
+#: the keys of a task's ``operating_point`` mapping (:func:`parse_operating_point`)
+OPERATING_POINT_KEYS = (
+    "debounce",
+    "thresholds",
+    "cost",
+    "max_early_alarm_rate",
+    "max_alarms_per_disturbance",
+)
+#: summary columns a smaller value of which is better (a cost, a delay, a rate of mistakes)
+MINIMISED = frozenset(
+    {
+        "cost",
+        "delay_ms",
+        "delay_p90_ms",
+        "early_alarm_rate",
+        "false_alarms_per_min",
+        "missed",
+        "alarms_per_disturbance",
+    }
+)
+
+
+def parse_operating_point(
+    node: Mapping[str, Any] | None, where: str = "task.operating_point"
+) -> dict[str, Any] | None:
+    """A task's ``operating_point`` mapping checked: ``debounce`` candidates (whole
+    numbers >= 1), ``thresholds`` quantiles (>= 2), the ``cost`` (:func:`parse_cost`)
+    and the limits (:func:`parse_limits`); None stays None.
+
+    Returns
+    -------
+    dict or None
+        ``{"debounce": [int], "thresholds": int, "cost": Cost, "limits": Limits}``.
+
+    Raises
+    ------
+    SlipkitError
+        Naming ``where`` and the key at fault.
+    """
+    if node is None:
+        return None
+    if not isinstance(node, Mapping):
+        raise SlipkitError(
+            f"{where}: must be a mapping such as {{debounce: [1, 2, 3, 5], thresholds: "
+            f"64}} or null; got {node!r}"
+        )
+    unknown = sorted(str(k) for k in node if k not in OPERATING_POINT_KEYS)
+    if unknown:
+        raise SlipkitError(
+            f"{where}.{unknown[0]}: unknown key; known: {list(OPERATING_POINT_KEYS)}"
+        )
+    debounce = node.get("debounce", list(DEFAULT_DEBOUNCE))
+    if (
+        not isinstance(debounce, Sequence)
+        or isinstance(debounce, str)
+        or not debounce
+        or any(isinstance(k, bool) or not isinstance(k, int) or k < 1 for k in debounce)
+    ):
+        raise SlipkitError(
+            f"{where}.debounce: must be a non-empty list of whole numbers >= 1 "
+            f"(consecutive samples); got {debounce!r}"
+        )
+    n = node.get("thresholds", DEFAULT_THRESHOLDS)
+    if isinstance(n, bool) or not isinstance(n, int) or n < 2:
+        raise SlipkitError(
+            f"{where}.thresholds: must be a whole number >= 2 (quantiles); got {n!r}"
+        )
+    return {
+        "debounce": [int(k) for k in debounce],
+        "thresholds": int(n),
+        "cost": parse_cost(node.get("cost"), f"{where}.cost"),
+        "limits": parse_limits(node, where),
+    }
+
+
 def slipped_of(labels: Mapping[str, Any], onset_s: float) -> bool | None:
     """Whether a trial slipped, from its labels: the ``slipped`` label (1 / 0; NaN:
     unknown, True when an onset is known) when the dataset has one, else a known onset
@@ -547,6 +622,7 @@ def choose_operating_point(
 __all__ = [
     "DEFAULT_DEBOUNCE",
     "DEFAULT_THRESHOLDS",
+    "OPERATING_POINT_KEYS",
     "SLIPPED_LABEL",
     "SUMMARY_COLUMNS",
     "Cost",
@@ -560,6 +636,7 @@ __all__ = [
     "events_table",
     "parse_cost",
     "parse_limits",
+    "parse_operating_point",
     "slipped_of",
     "summarise",
     "threshold_grid",
