@@ -174,29 +174,46 @@ def test_the_operating_point_is_the_cheaper_one_on_the_validation_trials() -> No
 
 
 def test_a_limit_passes_over_the_cheaper_point() -> None:
-    """Early alarms at most 0 %: the cheaper point that alarms on the touch is passed over."""
+    """With early alarms at 0.05, alarming at 0.5 (on the touch too) is cheaper than waiting
+    80 ms for 0.8; an early-alarm limit of 0 % passes it over for the later point."""
+    slip = np.full(20, 0.1)
+    slip[10:] = 0.6
+    slip[18:] = 0.9
+    touch = np.full(20, 0.1)
+    touch[5:8] = 0.7
+    truths = [TrialTruth("s", T, True, 0.10), TrialTruth("t", T, False)]
+    kw = {"thresholds": [0.5, 0.8], "debounce_ks": [1], "cost": Cost(early_alarm=0.05)}
+    free = choose_operating_point(truths, [slip, touch], limits=Limits(None), **kw)  # type: ignore[arg-type]
+    held = choose_operating_point(
+        truths,
+        [slip, touch],
+        limits=Limits(max_early_alarm_rate=0.0),
+        **kw,  # type: ignore[arg-type]
+    )
+    assert (0.5, 0.8) == (free.threshold, held.threshold)
+    assert (0.5, 0.0) == (
+        free.summary["early_alarm_rate"],
+        held.summary["early_alarm_rate"],
+    )
+
+
+def test_a_point_no_better_than_no_detector_is_no_operating_point() -> None:
+    """Silent (cost 0.5, every slip missed) is within a 0 % early-alarm limit but costs what no
+    detector costs: the cheaper point over the limit is kept, flagged."""
     slip = np.where(T >= 0.10, 0.9, 0.1)
     touch = np.full(20, 0.1)
     touch[5:8] = 0.95
-    truths = [TrialTruth("s", T, True, 0.10), TrialTruth("t", T, False)]
-    free = choose_operating_point(
-        truths,
-        [slip, touch],
-        thresholds=[0.5, 0.96],
-        debounce_ks=[1],
-        limits=Limits(None),
-    )
-    held = choose_operating_point(
-        truths,
+    point = choose_operating_point(
+        [TrialTruth("s", T, True, 0.10), TrialTruth("t", T, False)],
         [slip, touch],
         thresholds=[0.5, 0.96],
         debounce_ks=[1],
         limits=Limits(max_early_alarm_rate=0.0),
     )
-    assert (0.5, 0.96) == (free.threshold, held.threshold)
-    assert (0.5, 0.0) == (
-        free.summary["early_alarm_rate"],
-        held.summary["early_alarm_rate"],
+    assert (0.5, False, 0.5) == (
+        point.threshold,
+        point.within_limits,
+        point.summary["cost_without_detector"],
     )
 
 
@@ -212,7 +229,8 @@ def test_no_point_within_the_limits_keeps_the_cheapest_flagged() -> None:
     )
     assert (
         False,
-        "no candidate within the limits; the cheapest one (early alarms 100 % > 25 %)",
+        "no candidate within the limits that beats no detector; the cheapest one "
+        "(early alarms 100 % > 25 %)",
     ) == (
         point.within_limits,
         point.note,

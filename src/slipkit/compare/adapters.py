@@ -696,6 +696,7 @@ def event_row(op: Mapping[str, Any], source: str) -> dict[str, Any]:
     row["debounce_k"] = _num(op.get("debounce_k"))
     row["operating_point_from"] = source
     row["unknown_onset_trials"] = _num(op.get("unknown_onset_trials"))
+    row["cost_without_detector"] = _num(op.get("cost_without_detector"))
     return row
 
 

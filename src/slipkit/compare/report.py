@@ -230,8 +230,18 @@ def deploy_lines(
     )
     out += _tie_lines(choice)
     passed = [(e, w) for e, w in choice.passed_over if e != str(best["estimator"])]
+    if not choice.recommended:
+        own = [w for e, w in choice.passed_over if e == str(best["estimator"])]
+        if own:
+            out += ["", f"Not recommended: {own[0]}."]
     if passed:
-        out += ["", "Passed over (higher or equal score):", ""]
+        out += [
+            "",
+            "Passed over (higher or equal score):"
+            if choice.recommended
+            else "The others:",
+            "",
+        ]
         out += [f"- `{e}`: {w}{_load_note(df, e, w)}" for e, w in passed]
     if cost is not None:
         out += ["", *_cost_lines(df, cost, max_early_alarm_rate, limit)]

@@ -13,7 +13,7 @@ from numpy.typing import ArrayLike
 
 from slipkit.compare.adapters import ROW_COLUMNS
 from slipkit.errors import SlipkitError
-from slipkit.evaluate.events import Cost, parse_cost
+from slipkit.evaluate.events import Cost, no_better_than_nothing, parse_cost
 
 #: columns of ``metrics.csv`` before the per-axis regression columns
 COLUMNS = (
@@ -187,7 +187,8 @@ class DeployChoice:
         True when ``row`` is exported and its p99 (us) meets its p99 budget (us).
     passed_over : tuple of (str, str)
         ``(estimator, reason)`` for each row that scores at least as high as ``row`` (ranked
-        before it) and was not chosen; with ``recommended`` False, ``row``'s own reason last.
+        before it) and was not chosen; with ``recommended`` False, every row's reason in
+        ranking order, ``row``'s own among them.
     margin : float
         ``row``'s p99 / p99 budget (dimensionless; NaN when not measured).
     tied : tuple of str
@@ -218,9 +219,10 @@ def _rejection(
     max_alarms_per_disturbance: float | None = None,
     max_early_alarm_rate: float | None = None,
 ) -> str | None:
-    """Why ``r`` cannot be recommended (None when it can): not exported, firing on more
-    than ``max_alarms_per_disturbance`` of the test disturbances, an early alarm in more
-    than ``max_early_alarm_rate`` of the test trials, or p99 over budget.
+    """Why ``r`` cannot be recommended (None when it can): not exported, a trial cost
+    no lower than no detector's (every slip missed), an early alarm in more than
+    ``max_early_alarm_rate`` of the test trials, firing on more than
+    ``max_alarms_per_disturbance`` of the test disturbances, or p99 over budget.
 
     An exported row's rates are named before its p99: a rate is a property of the
     estimator on the data, the p99 a measurement a busy machine can move, so the reason
@@ -230,7 +232,8 @@ def _rejection(
     if r.get("export") != "ok":
         return deploy
     return (
-        _early_rejection(r, max_early_alarm_rate)
+        no_better_than_nothing({str(k): v for k, v in r.items()})
+        or _early_rejection(r, max_early_alarm_rate)
         or _disturbance_rejection(r, max_alarms_per_disturbance)
         or deploy
     )
@@ -426,9 +429,8 @@ def choose_deploy(
     exported = np.flatnonzero(ranked["export"].eq("ok").to_numpy())
     pos = int(exported[0]) if len(exported) else 0
     row = ranked.iloc[pos]
-    return DeployChoice(
-        row, False, tuple(passed[: pos + 1]), _margin(row), n_seeds=n_seeds
-    )
+    # nothing qualifies: every row's reason, the shown row's own among them
+    return DeployChoice(row, False, tuple(passed), _margin(row), n_seeds=n_seeds)
 
 
 #: what breaks a tie, in order: (column, what lower means, unit)

@@ -83,6 +83,18 @@ class Limits:
     max_early_alarm_rate: float | None = 0.25
     max_alarms_per_disturbance: float | None = None
 
+    def excess(self, summary: Mapping[str, Any]) -> float:
+        """How far the summary's rates lie over their limits, summed (0: within)."""
+        total = 0.0
+        for key, column in (
+            ("max_early_alarm_rate", "early_alarm_rate"),
+            ("max_alarms_per_disturbance", "alarms_per_disturbance"),
+        ):
+            limit, rate = getattr(self, key), _float(summary.get(column))
+            if limit is not None and math.isfinite(rate):
+                total += max(rate - limit, 0.0)
+        return total
+
     def breach(self, summary: Mapping[str, Any]) -> str | None:
         """Why ``summary`` is over a limit (None: within every limit; a NaN rate is not held)."""
         for key, column, what in (
@@ -414,6 +426,7 @@ SUMMARY_COLUMNS = (
     "unknown_onset_trials",
     "disturbances",
     "cost",
+    "cost_without_detector",
 )
 
 
@@ -426,7 +439,9 @@ def summarise(events: Sequence[TrialEvents], cost: Cost) -> dict[str, Any]:
     with an alarm; NaN without disturbances), ``delay_ms`` (median) and
     ``delay_p90_ms``, ``n_slips``, ``missed``, ``event_trials`` (trials of known
     outcome), ``unknown_onset_trials`` (slip trials scored on detection only),
-    ``disturbances`` and ``cost`` (mean over trials of known outcome).
+    ``disturbances``, ``cost`` (mean over trials of known outcome) and
+    ``cost_without_detector`` (what never alarming costs on the same trials: every slip
+    missed; a detector is worth deploying only below it).
     """
     slips = [e for e in events if e.slipped is True]
     detected = [e for e in slips if e.detected]
@@ -457,6 +472,9 @@ def summarise(events: Sequence[TrialEvents], cost: Cost) -> dict[str, Any]:
         "unknown_onset_trials": sum(not math.isfinite(e.onset_s) for e in slips),
         "disturbances": n_dist,
         "cost": float(costs.mean()) if len(costs) else math.nan,
+        "cost_without_detector": (
+            cost.miss * len(slips) / len(costs) if len(costs) else math.nan
+        ),
     }
 
 
@@ -557,9 +575,15 @@ def choose_operating_point(
 ) -> OperatingPoint:
     """The (threshold, debounce) of lowest mean cost on ``truths`` among the points within ``limits``.
 
-    Ties of cost go to the smaller debounce (an earlier alarm), then to the middle of
-    the tied thresholds (the middle of a plateau, not its edge). With no point within
-    the limits the cheapest point is returned with ``within_limits`` False and a note.
+    A point qualifies when it is within the limits and costs less than no detector
+    (``cost_without_detector``: a point that never alarms, or alarms only where it
+    should not, is no operating point). Ties of cost go to the smaller debounce (an
+    earlier alarm), then to the middle of the tied thresholds (the middle of a plateau,
+    not its edge). With no point qualifying, the point nearest the limits among those
+    that beat no detector (least total excess of the rates over their limits, then
+    cheapest) is returned with ``within_limits`` False and a note; the cheapest point
+    alone would be one that alarms everywhere, which an early-alarm weight below a
+    miss makes cheap.
 
     Parameters
     ----------
@@ -591,7 +615,7 @@ def choose_operating_point(
             summary, _ = evaluate_point(
                 truths, scores, float(th), k, cost, tolerance_s=tolerance_s
             )
-            grid.append((float(th), k, summary, limits.breach(summary)))
+            grid.append((float(th), k, summary, _disqualified(summary, limits)))
 
     def best(points: list[tuple[float, int, dict[str, Any], str | None]]) -> int:
         c = np.asarray([_float(p[2]["cost"]) for p in points])
@@ -607,16 +631,43 @@ def choose_operating_point(
     if ok:
         th, k, summary, _ = ok[best(ok)]
         return OperatingPoint(th, k, summary, True, "", len(grid), ids)
-    th, k, summary, why = grid[best(grid)]
+    useful = [p for p in grid if no_better_than_nothing(p[2]) is None]
+    if useful:
+        excess = np.asarray([limits.excess(p[2]) for p in useful])
+        near = [
+            p for p, e in zip(useful, excess, strict=True) if e <= excess.min() + 1e-12
+        ]
+        th, k, summary, why = near[best(near)]
+        what = "the one nearest the limits"
+    else:
+        th, k, summary, why = grid[best(grid)]
+        what = "the cheapest one"
     return OperatingPoint(
         th,
         k,
         summary,
         False,
-        f"no candidate within the limits; the cheapest one ({why})",
+        f"no candidate within the limits that beats no detector; {what} ({why})",
         len(grid),
         ids,
     )
+
+
+def no_better_than_nothing(summary: Mapping[str, Any]) -> str | None:
+    """``costs 1.05 per trial, no less than no detector (1.00)`` when the summary's cost
+    is not below ``cost_without_detector`` (None: it is, or either is undefined)."""
+    c = _float(summary.get("cost"))
+    floor = _float(summary.get("cost_without_detector"))
+    if not (math.isfinite(c) and math.isfinite(floor)) or c < floor - 1e-12:
+        return None
+    return (
+        f"costs {c:.3g} per trial, no less than no detector ({floor:.3g}: every slip "
+        "missed, no alarm)"
+    )
+
+
+def _disqualified(summary: Mapping[str, Any], limits: Limits) -> str | None:
+    return limits.breach(summary) or no_better_than_nothing(summary)
 
 
 __all__ = [
@@ -634,6 +685,7 @@ __all__ = [
     "choose_operating_point",
     "evaluate_point",
     "events_table",
+    "no_better_than_nothing",
     "parse_cost",
     "parse_limits",
     "parse_operating_point",
