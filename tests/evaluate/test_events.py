@@ -273,3 +273,13 @@ def test_bad_limits_are_named() -> None:
     """A limit above 1 names its key."""
     with pytest.raises(SlipkitError, match=r"verdict\.max_early_alarm_rate"):
         parse_limits({"max_early_alarm_rate": 25}, "verdict")
+
+
+def test_a_bad_operating_point_is_named() -> None:
+    """A debounce of 0 or an unknown key in task.operating_point: one line naming it."""
+    from slipkit.evaluate.events import parse_operating_point
+
+    with pytest.raises(SlipkitError, match=r"task\.operating_point\.debounce: must be"):
+        parse_operating_point({"debounce": [0]})
+    with pytest.raises(SlipkitError, match=r"task\.operating_point\.thresold: unknown"):
+        parse_operating_point({"thresold": 8})
