@@ -205,3 +205,14 @@ def test_over_budget_row_under_load_is_told_apart() -> None:
         "- `a`: p99 900 us > 50 us budget (its quietest block's p99 30.0 us meets the "
         "budget: the machine's load put it over; re-measure on an idle machine)"
     ) in lines
+
+
+def test_seed_table_keeps_where_each_operating_point_was_chosen() -> None:
+    """A text column (operating_point_from) survives the averaging, each value once."""
+    rows = _seed_rows().assign(
+        operating_point_from="validation: group k-fold by trial, k=3"
+    )
+    df = seed_table(rows, {}, "balanced_accuracy").set_index("estimator")
+    assert ["validation: group k-fold by trial, k=3"] * 2 == df[
+        "operating_point_from"
+    ].tolist()
