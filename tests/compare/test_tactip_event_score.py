@@ -56,7 +56,7 @@ def test_frame_and_stream_conventions_give_the_same_frames() -> None:
 def test_both_tasks_rows_carry_the_event_score_on_the_same_trials(
     tmp_path: Path,
 ) -> None:
-    """comparison=tactip: the SVM and the detector rows hold on_time_rate, over the same trials and onset frames."""
+    """comparison=tactip: the SVM and the detector rows hold on_time_rate and the trial cost, over the same trials and onset frames."""
     with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
         cfg = compose(
             config_name="compare",
@@ -76,11 +76,14 @@ def test_both_tasks_rows_carry_the_event_score_on_the_same_trials(
     det = result.evaluations["alignment"].trial_events
     assert isinstance(svm, pd.DataFrame)
     assert isinstance(det, pd.DataFrame)
-    assert ("on_time_rate", 2) == (result.table.attrs["primary"], len(det))
+    assert ("cost", 2) == (result.table.attrs["primary"], len(det))
     assert svm[["trial_id", "onset_frame"]].to_dict("list") == det[
         ["trial_id", "onset_frame"]
     ].to_dict("list")
     rows = result.table.set_index("estimator")
+    # both rows carry the trial events of their deployed operating point, on both test trials
+    assert [2, 2] == rows.loc[["svm_rbf", "alignment"], "event_trials"].tolist()
+    assert rows.loc[["svm_rbf", "alignment"], "cost"].notna().all()
     for name, events in (("svm_rbf", svm), ("alignment", det)):
         on_time = float(np.mean(events["outcome"].isin(["on_time", "quiet"])))
         early = float(np.mean(events["outcome"].isin(["early", "false_alarm"])))

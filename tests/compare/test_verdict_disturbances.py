@@ -120,7 +120,7 @@ def test_bad_verdict_limits_are_named(node: object, match: str) -> None:
 
 
 def test_verdict_limits_read_the_fsr_comparison() -> None:
-    """configs/comparison/fsr.yaml sets the 10 % limit of issue 14."""
+    """configs/comparison/fsr.yaml sets the 10 % disturbance limit beside the 25 % early-alarm one."""
     from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
@@ -129,4 +129,7 @@ def test_verdict_limits_read_the_fsr_comparison() -> None:
     with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
         cfg = compose(config_name="compare", overrides=["comparison=fsr"])
     node = OmegaConf.to_container(cfg.comparison, resolve=True)
-    assert {"max_alarms_per_disturbance": 0.10} == verdict_limits(node["verdict"])  # type: ignore[index,call-overload]
+    assert {
+        "max_alarms_per_disturbance": 0.10,
+        "max_early_alarm_rate": 0.25,
+    } == verdict_limits(node["verdict"])  # type: ignore[index,call-overload]

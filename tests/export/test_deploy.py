@@ -138,14 +138,16 @@ def test_exported_bundle_decides_as_the_estimator(
 def test_tactip_manifest_carries_slip_class_debounce_budget_and_features(
     runs: dict[str, Path], tmp_path: Path
 ) -> None:
-    """The TacTip bundle: raw pins in, 'slip' positive, debounce 2, TacTip budget, parity and provenance."""
+    """The TacTip bundle: raw pins in, 'slip' positive, the debounce the run chose on
+    validation, TacTip budget, parity and provenance."""
     out = tmp_path / "tactip"
     export_main(_export_cfg(runs["tactip_svm"], out))
     raw = json.loads((out / "manifest.json").read_text())
+    chosen = json.loads((runs["tactip_svm"] / "metrics.json").read_text())
     assert ["pins"] == raw["frame"]["streams"]
     assert [2, 254] == [raw["frame"]["window"], raw["frame"]["shape"][0]]
     assert "slip" == raw["decision"]["positive"]
-    assert 2 == raw["debounce"]["k"]
+    assert chosen["operating_point"]["debounce_k"] == raw["debounce"]["k"]
     assert pytest.approx(1000.0 / 120.0 / 10) == raw["budget_ms"]["p99"]  # 120 Hz data
     assert "subtract" == raw["preprocessing"][0]["op"]
     assert raw["training"]["parity"]["passed"] is True

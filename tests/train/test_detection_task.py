@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from hydra import compose, initialize_config_dir
 from tests.strategies import make_dataset
@@ -13,6 +15,7 @@ from tests.strategies import make_dataset
 from slipkit import config_dir
 from slipkit.baselines.biotac import ForceDerivative
 from slipkit.data import save_dataset
+from slipkit.data.dataset import Dataset, LabelSpec, StreamSpec, Trial
 from slipkit.errors import SlipkitError
 from slipkit.sim.commands import build_scene
 from slipkit.train.commands import evaluate_main, train_main
@@ -102,7 +105,10 @@ def test_fsr_roc_trains_and_evaluates(
     assert "paper 8" in printed
     assert (run / "roc.png").stat().st_size > 0
     metrics = json.loads((run / "metrics.json").read_text())
-    assert "event ROC (Youden)" == metrics["threshold_from"]
+    assert (
+        "lowest cost on validation: group k-fold by trial, k=2"
+        == metrics["threshold_from"]
+    )
     assert 0 == metrics["test"]["disturbances"]["fired"]
     from slipkit.train.runs import read_run
 
@@ -193,3 +199,131 @@ def test_detection_objective_is_a_validation_score_test_labels_cannot_move(
     assert clean["test"]["samples"]["auc"] != bad["test"]["samples"]["auc"]
     assert clean["validation"] == bad["validation"]
     assert task.objective_value(clean) == task.objective_value(bad)
+
+
+# -- operating point on validation trials -------------------------------------------------
+
+
+def _slip_dataset(n_trials: int = 12, n_objects: int = 3) -> Dataset:
+    """Trials of a 100 Hz signal that jumps at the onset; every fourth trial a touch
+    without slip (NaN onset and a ``slipped`` label of 0), objects cycling."""
+    trials = []
+    for i in range(n_trials):
+        r = np.random.default_rng(i)
+        t = np.arange(200) / 100.0
+        slipped = i % 4 != 3
+        onset = float(r.uniform(0.8, 1.2)) if slipped else math.nan
+        x = r.normal(0.0, 0.1, 200)
+        if slipped:
+            x[t >= onset] += 3.0
+        trials.append(
+            Trial(
+                f"tr{i:02d}",
+                {"signal": pd.DataFrame({"t": t, "x": x})},
+                labels={"slip_onset_s": onset, "slipped": float(slipped)},
+                meta={"object": f"obj{i % n_objects}"},
+            )
+        )
+    return Dataset.from_trials(
+        trials,
+        sensor="generic",
+        streams={"signal": StreamSpec("signal", ("x",), {"x": "1"}, rate_hz=100.0)},
+        labels={
+            "slip_onset_s": LabelSpec("slip_onset_s", unit="s"),
+            "slipped": LabelSpec("slipped"),
+        },
+        groups=("object",),
+        name="slips",
+    )
+
+
+def _detection(**kw: object) -> StreamDetection:
+    return StreamDetection(
+        stream="signal",
+        roc_unit="sample",
+        negative_window_s=0.1,
+        operating_point={"debounce": [1, 2, 3]},
+        name="own",
+        **kw,  # type: ignore[arg-type]
+    )
+
+
+def test_the_operating_point_is_chosen_on_training_trials_only(tmp_path: Path) -> None:
+    """The recorded provenance: the point was chosen on exactly the training trials (by
+    object folds), never on a test trial, and the test split was scored at it."""
+    from slipkit.baselines.generic import ChannelChangeDetector
+
+    result = _detection().fit(
+        ChannelChangeDetector(feature="derivative"),
+        _slip_dataset(),
+        seed=0,
+        out=tmp_path,
+    )
+    m = result.metrics
+    op = m["operating_point"]
+    assert (set(m["split"]["train"]), set()) == (
+        set(op["chosen_on"]),
+        set(op["chosen_on"]) & set(m["split"]["test"]),
+    )
+    assert "validation: group k-fold by object, k=3" == op["from"]
+    assert (op["debounce_k"], len(m["split"]["test"])) == (
+        m["test"]["operating_point"]["debounce_k"],
+        m["test"]["operating_point"]["event_trials"],
+    )
+
+
+def test_split_by_group_keeps_each_object_on_one_side(tmp_path: Path) -> None:
+    """split=auto on data with objects: every object on one side; the touches (slipped 0,
+    NaN onset) are no-slip trials, not unknown ones."""
+    from slipkit.baselines.generic import ChannelChangeDetector
+
+    ds = _slip_dataset()
+    result = _detection(split="auto", test_size=0.33).fit(
+        ChannelChangeDetector(feature="derivative"), ds, seed=0, out=tmp_path
+    )
+    m = result.metrics
+    obj = ds.trials.set_index("trial_id")["object"]
+    train, test = set(obj[m["split"]["train"]]), set(obj[m["split"]["test"]])
+    assert ("object", set(), 1) == (m["split_by"], train & test, len(test))
+    table = pd.read_csv(tmp_path / "test_trials.csv")
+    touches = table[table["slipped"] == False]  # noqa: E712
+    assert (1, 0) == (len(touches), int(touches["onset_s"].notna().sum()))
+
+
+def test_a_fixed_threshold_stays_and_only_the_debounce_is_chosen(
+    tmp_path: Path,
+) -> None:
+    """A detector with threshold in its config keeps it; the debounce is still chosen."""
+    from slipkit.baselines.generic import ChannelChangeDetector
+
+    det = ChannelChangeDetector(feature="derivative", threshold=5.0)
+    result = _detection().fit(det, _slip_dataset(), seed=0, out=tmp_path)
+    op = result.metrics["operating_point"]
+    assert (5.0, 5.0, True) == (
+        op["threshold"],
+        result.model.threshold_,
+        op["debounce_k"] in (1, 2, 3),
+    )
+
+
+def test_export_deploys_the_runs_chosen_debounce(tmp_path: Path) -> None:
+    """slipkit export with debounce_k=null writes the debounce the run chose on validation."""
+    from slipkit.cli import main
+
+    run = tmp_path / "run"
+    cfg = compose_train(
+        "experiment=fsr_roc",
+        "dataset.n_trials=4",
+        f"run_dir={run}",
+        "task.operating_point.debounce=[3]",
+    )
+    train_main(cfg)  # type: ignore[arg-type]
+    assert (
+        3
+        == json.loads((run / "metrics.json").read_text())["operating_point"][
+            "debounce_k"
+        ]
+    )
+    main(["export", f"run={run}", f"out={tmp_path / 'bundle'}", "choose_session=false"])
+    manifest = json.loads((tmp_path / "bundle" / "manifest.json").read_text())
+    assert {"k": 3} == manifest["debounce"]

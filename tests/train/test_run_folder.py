@@ -231,40 +231,53 @@ def _two_trials(rate: float = 100.0) -> Recordings:
 
 
 def test_operating_point_counts_slips_early_alarms_false_alarms_and_delay() -> None:
-    """Trial a fires at 30 ms before and 30 ms after its onset, b never: 1/2, 1/2, 1 per 0.2 s."""
+    """Trial a alarms 70 ms before and 30 ms after its onset, b never: 1/2 detected, 1/2
+    early, 1 false alarm in 0.2 s of non-slip time, 30 ms, cost (0.2 + 0.06 + 1) / 2."""
     task = StreamDetection(stream="s", negative_window_s=0.01)
     scores = np.zeros(40)
     scores[[3, 13]] = 1.0
     point = task._at_threshold(_two_trials(), scores, 0.5)["operating_point"]
     assert {
+        "threshold": 0.5,
         "debounce_k": 1,
-        "slips_detected": 1,
-        "n_slips": 2,
-        "alarms_before_onset": 1,
-        "n_trials": 2,
-        # one fired 10 ms non-slip window in 20 non-slip samples at 100 Hz
+        "detected_rate": 0.5,
+        "early_alarm_rate": 0.5,
         "false_alarms_per_min": pytest.approx(300.0),
-        "median_delay_ms": pytest.approx(30.0),
-    } == point
+        "delay_ms": pytest.approx(30.0),
+        "n_slips": 2,
+        "missed": 1,
+        "event_trials": 2,
+        "unknown_onset_trials": 0,
+        "disturbances": 0,
+        "cost": pytest.approx(0.63),
+    } == {
+        k: v
+        for k, v in point.items()
+        if k not in ("alarms_per_disturbance", "delay_p90_ms")
+    }
 
 
 def test_operating_point_line_reads_as_the_deployed_detector() -> None:
-    """36 of 40 slips, 3 early trials, 0.8 false alarms per minute, 42 ms: one line."""
+    """36 of 40 slips, 10 % early, 0.8 false alarms per minute, 42 ms (p90 80): one line."""
     test = {
         "threshold": 8.0,
         "operating_point": {
-            "debounce_k": 1,
-            "slips_detected": 36,
+            "threshold": 8.0,
+            "debounce_k": 2,
             "n_slips": 40,
-            "alarms_before_onset": 3,
-            "n_trials": 40,
+            "missed": 4,
+            "event_trials": 40,
+            "early_alarm_rate": 0.1,
             "false_alarms_per_min": 0.8,
-            "median_delay_ms": 42.2,
+            "delay_ms": 42.2,
+            "delay_p90_ms": 80.4,
+            "cost": 0.213,
         },
     }
     assert (
-        "fsr at threshold 8 V/s, debounce 1: slips detected 36/40 (90 %), alarms "
-        "before onset 3/40 trials, false alarms 0.8 /min, median delay 42 ms"
+        "fsr at threshold 8 V/s, debounce 2: slips detected 36/40 (90 %), early alarms "
+        "10 % of trials, false alarms 0.8 /min, delay median 42 ms (p90 80 ms), cost "
+        "0.213 over 40 trials"
     ) == operating_point_line("fsr", test, "V/s")
 
 
@@ -288,8 +301,11 @@ def test_evaluate_prints_the_operating_point_first_and_writes_it(
     printed = capsys.readouterr().out.splitlines()
     ev = json.loads(out.read_text())
     point = ev["test"]["operating_point"]
+    chosen = read_run(run).metrics["operating_point"]
     assert operating_point_line(ev["name"], ev["test"], ev["unit"]) == printed[0]
-    assert (ev["test"]["trials"]["tp"], ev["test"]["trials"]["n_slip"]) == (
-        point["slips_detected"],
-        point["n_slips"],
+    # scored at the run's chosen threshold and debounce, on every trial of the data
+    assert (chosen["threshold"], chosen["debounce_k"], 2) == (
+        point["threshold"],
+        point["debounce_k"],
+        point["event_trials"],
     )

@@ -13,11 +13,17 @@ Unified columns (:data:`ROW_COLUMNS`; a missing one is NaN):
   the task has a slip class, else macro F1), ``tpr``, ``tnr``, ``fpr``, ``fnr``,
   ``roc_auc`` (slip as the positive class; a binary slip-type task takes its second
   class);
-* event level: ``delay_ms`` (median detection delay from the true slip onset, ms),
-  ``missed`` (slips never detected), ``n_slips``, ``false_alarms_per_min`` (alarms
-  per minute of non-slip data), ``disturbances`` (test disturbances: bumps, knocks
-  with no slip, where the task's data marks them) and ``alarms_per_disturbance``
-  (the fraction of them the estimator fired in; NaN where the data marks none);
+* trial events (every detection task, :mod:`slipkit.evaluate.events`, at the deployed
+  operating point): ``detected_rate`` (slips detected / slip trials),
+  ``early_alarm_rate`` (test trials with an alarm before the onset / trials where it
+  is defined), ``false_alarms_per_min`` (alarms declared in non-slip time per minute
+  of it), ``disturbances`` (test disturbances: bumps, knocks with no slip, where the
+  task's data marks them) and ``alarms_per_disturbance`` (the share of them with an
+  alarm; NaN where the data marks none), ``delay_ms`` (median delay from the onset to
+  the first alarm after it) and ``delay_p90_ms``, ``missed``, ``n_slips``,
+  ``event_trials`` (test trials of known outcome), ``cost`` (mean trial cost, lower is
+  better), the operating point ``threshold`` and ``debounce_k`` and
+  ``operating_point_from`` (which trials chose it);
 * regression: ``rmse`` and ``smse`` (means over axes) and ``rmse_<axis>``,
   ``smse_<axis>`` per axis (force N; SlipTack speed mm/s or acceleration m/s^2);
 * the window: ``window_frames`` and ``window_ms`` (sensor frames the estimator reads
@@ -62,12 +68,20 @@ ROW_COLUMNS = (
     "fpr",
     "fnr",
     "roc_auc",
+    "detected_rate",
+    "early_alarm_rate",
+    "false_alarms_per_min",
+    "alarms_per_disturbance",
     "delay_ms",
+    "delay_p90_ms",
     "missed",
     "n_slips",
-    "false_alarms_per_min",
+    "event_trials",
     "disturbances",
-    "alarms_per_disturbance",
+    "cost",
+    "threshold",
+    "debounce_k",
+    "operating_point_from",
     "rmse",
     "smse",
     "window_frames",
@@ -201,27 +215,6 @@ def _roc(
     }
 
 
-def _false_alarms(
-    table: pd.DataFrame, positive: str, debounce_k: int, rate_hz: float
-) -> tuple[int, float]:
-    """(alarms, minutes) over the non-slip frames of a per-frame predictions table.
-
-    An alarm is a debounced slip declaration (``k`` consecutive slip predictions)
-    that starts on a frame labelled non-slip; the minutes are non-slip frames / rate.
-    """
-    alarms, negatives = 0, 0
-    for _, g in table.groupby("trial_id", sort=False):
-        truth = (g["label"].astype(str) == positive).to_numpy()
-        pred = (g["pred"].astype(str) == positive).to_numpy()
-        negatives += int((~truth).sum())
-        run = 0
-        for p, t in zip(pred, truth, strict=True):
-            run = run + 1 if p else 0
-            if run == debounce_k and not t:
-                alarms += 1
-    return alarms, negatives / rate_hz / 60.0
-
-
 def trial_events(
     trial_ids: Sequence[str],
     onset_frames: Sequence[int | None],
@@ -283,6 +276,12 @@ def trial_events(
         }
     )
     return row, table
+
+
+def _event_delays(path: Path) -> list[float]:
+    """The finite ``delay_ms`` of a task's per-trial events table (ms)."""
+    delays = pd.read_csv(path)["delay_ms"].to_numpy(float)
+    return [float(v) for v in delays if math.isfinite(v)]
 
 
 def _first(flags: np.ndarray) -> int | None:
@@ -352,19 +351,21 @@ def adapt_tactip(view: RunView) -> Evaluation:
     row: dict[str, Any] = binary_rates(cm) if labels[-1] == SLIP else {}
     det = test["detection"]
     rate = task.rate_hz(view.dataset)
-    delays = [d * 1000.0 / rate for d in det["delay_frames"] if d is not None]
+    k = int(det["debounce_k"])  # the deployed debounce (chosen on validation)
     preds = pd.read_csv(view.folder / "test_predictions.csv")
-    alarms, minutes = _false_alarms(preds, SLIP, int(task.debounce_k), rate)
-    events, event_table = frame_task_events(preds, SLIP, int(task.debounce_k))
+    events, event_table = frame_task_events(preds, SLIP, k)
     row.update(events)
+    point = dict(view.metrics.get("operating_point") or {})
+    row.update(event_row(test["operating_point"], str(point.get("from", ""))))
+    delays = (
+        [float(v) for v in _event_delays(view.folder / "test_events.csv")]
+        if (view.folder / "test_events.csv").is_file()
+        else [d * 1000.0 / rate for d in det["delay_frames"] if d is not None]
+    )
     row.update(
-        delay_ms=_num(det["median_ms"]),
-        missed=int(det["missed"]),
-        n_slips=int(det["n_trials"]),
-        false_alarms_per_min=alarms / minutes if minutes else math.nan,
         window_frames=2,  # a pin velocity is the difference of two frames
         window_ms=2 * 1000.0 / rate,
-        decision_frames=2 + int(task.debounce_k) - 1,
+        decision_frames=2 + k - 1,
     )
     roc = None
     if hasattr(view.model, "decision_function"):
@@ -500,30 +501,18 @@ def adapt_detection(view: RunView) -> Evaluation:
     row["roc_auc"] = _num(s.get("auc"))
     trials = pd.read_csv(view.folder / "test_trials.csv")
     trials = trials[trials["detector"] == m["name"]] if "detector" in trials else trials
-    slips = trials[trials["onset_s"].notna()]
-    latency = slips["latency_ms"].to_numpy(float)
+    latency = trials["delay_ms"].to_numpy(float)
     delays = [float(v) for v in latency if math.isfinite(v)]
     ev = test["events"]
     rec_rate = float(view.dataset.streams[task.stream].rate_hz or math.nan)
-    minutes = s["n_neg"] / rec_rate / 60.0
-    # A false alarm is a non-slip event unit (negative_window_s of non-slip data) that fired.
+    point = dict(m.get("operating_point") or {})
+    row.update(event_row(test["operating_point"], str(point.get("from", ""))))
+    # event level (the papers' unit): one unit per slip, one per negative window
     row.update(
-        delay_ms=float(np.median(delays)) if delays else math.nan,
-        missed=int(len(slips) - len(delays)),
-        n_slips=len(slips),
-        false_alarms_per_min=ev["fp"] / minutes if minutes else math.nan,
-        # event level (the papers' unit): one unit per slip, one per negative window
         event_tpr=_num(ev.get("tpr")),
         event_tnr=_num(ev.get("tnr")),
         event_auc=_num(ev.get("auc")),
     )
-    dist = test.get("disturbances")
-    if dist:
-        n_dist = int(dist["n"])
-        row["disturbances"] = n_dist
-        row["alarms_per_disturbance"] = (
-            int(dist["fired"]) / n_dist if n_dist else math.nan
-        )
     window = _detector_window(view.model)
     row.update(
         window_frames=window,
@@ -539,12 +528,16 @@ def adapt_detection(view: RunView) -> Evaluation:
     if str(view.dataset.sensor) == "tactip":
         # the TacTip event measure, on the frames the frame task scores (module notes);
         # the task's own rule: slip where the score reaches the threshold
+        from slipkit.evaluate.events import alarm_indices
+
+        fired = np.zeros(len(scores), dtype=bool)
+        k = int(row["debounce_k"]) if math.isfinite(row["debounce_k"]) else 1
+        for a, b in rec.bounds():  # the deployed rule: the k-th sample >= threshold
+            fired[a + alarm_indices(scores[a:b], float(view.model.threshold_), k)] = (
+                True
+            )
         events, event_table = stream_task_events(
-            rec.t,
-            scores >= float(view.model.threshold_),
-            rec.bounds(),
-            rec.onset_s,
-            rec.trial_ids,
+            rec.t, fired, rec.bounds(), rec.onset_s, rec.trial_ids
         )
         row.update(events)
     return Evaluation(
@@ -669,8 +662,42 @@ def adapt_davis(view: RunView) -> Evaluation:
         minutes = (float(span.sum()) - float(slip)) / 60.0
         # The task scores bins, not alarms: a false-positive bin is the alarm counted here.
         row["false_alarms_per_min"] = fp / minutes if minutes > 0 else math.nan
+    if "operating_point" in m["test"]:  # trial events: each slip frame an alarm
+        point = dict(m.get("operating_point") or {})
+        row.update(event_row(m["test"]["operating_point"], str(point.get("from", ""))))
     row.update(window_frames=1, window_ms=frame_s * 1000.0, decision_frames=1)
     return Evaluation(row=row, delays_ms=delays, split=m["split"])
+
+
+#: the trial-event columns a detection task's operating point gives a row
+EVENT_COLUMNS = (
+    "detected_rate",
+    "early_alarm_rate",
+    "false_alarms_per_min",
+    "alarms_per_disturbance",
+    "delay_ms",
+    "delay_p90_ms",
+    "missed",
+    "n_slips",
+    "event_trials",
+    "disturbances",
+    "cost",
+)
+
+
+def event_row(op: Mapping[str, Any], source: str) -> dict[str, Any]:
+    """The row's trial-event columns from a task's test ``operating_point`` summary
+    (:func:`slipkit.evaluate.events.summarise` with ``threshold`` and ``debounce_k``)
+    and where the point was chosen (``operating_point_from``)."""
+    row: dict[str, Any] = {c: _num(op.get(c)) for c in EVENT_COLUMNS}
+    if not row["disturbances"]:
+        row["disturbances"] = math.nan  # the data marks none
+    row["threshold"] = _num(op.get("threshold"))
+    row["debounce_k"] = _num(op.get("debounce_k"))
+    row["operating_point_from"] = source
+    row["unknown_onset_trials"] = _num(op.get("unknown_onset_trials"))
+    row["cost_without_detector"] = _num(op.get("cost_without_detector"))
+    return row
 
 
 def _register_builtin() -> None:

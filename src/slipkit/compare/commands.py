@@ -40,10 +40,12 @@ from slipkit.compare.adapters import Evaluation, RunView, adapt
 from slipkit.compare.costs import DeployCost, FitTimer, deploy_cost, quiet_console
 from slipkit.compare.report import write_report
 from slipkit.compare.table import (
+    VERDICT_KEYS,
     block_p99,
     build_table,
     quiet_p99,
     seed_table,
+    verdict_cost,
     verdict_limits,
 )
 from slipkit.errors import SlipkitError
@@ -118,6 +120,15 @@ def _train_config(
         task = override
     else:
         task.update(override)
+    verdict = comp.get("verdict")
+    if isinstance(task.get("operating_point"), Mapping) and isinstance(
+        verdict, Mapping
+    ):
+        # one declaration: the verdict's cost and limits choose each operating point
+        task["operating_point"] = {
+            **task["operating_point"],
+            **{k: v for k, v in verdict.items() if k in VERDICT_KEYS},
+        }
     cfg = OmegaConf.create(
         {
             "name": f"{comp['name']}-{est}",
@@ -496,13 +507,13 @@ def run_comparison(
         raise SlipkitError(f"comparison {comp.get('name')!r} lists no estimators")
     seeds = comparison_seeds(cfg, comp)
     several = len(seeds) > 1
+    # checked before anything trains: a typo in a limit must not cost a comparison
+    limits = verdict_limits(comp.get("verdict"), "comparison.verdict")
     with quiet_console():
         check_estimators(
             _seed_comparison(comp, seeds[0], several=several, data=data), cfg
         )
     primary = str(comp.get("primary", "accuracy"))
-    # checked before anything trains: a typo in a limit must not cost a comparison
-    limits = verdict_limits(comp.get("verdict"), "comparison.verdict")
     analytic = [str(a) for a in comp.get("analytic") or []]
     cost_cfg = _container(cfg.get("cost") or OmegaConf.create({}))
     keep = bool(cost_cfg.get("keep_bundles", False))
@@ -611,6 +622,7 @@ def run_comparison(
         summaries=summaries,
         seconds=time.perf_counter() - start,
         verdict_limits=limits,
+        cost=verdict_cost(comp.get("verdict")) if primary == "cost" else None,
     )
     return Comparison(folder, report, df, evals, costs, list(seeds), runs_of, seeds_df)
 

@@ -11,6 +11,7 @@ import pandas as pd
 
 from slipkit.compare.table import (
     BORDERLINE,
+    DeployChoice,
     choose_deploy,
     disturbance_rate,
     is_borderline,
@@ -18,6 +19,7 @@ from slipkit.compare.table import (
     per_unit,
     score_of,
 )
+from slipkit.evaluate.events import Cost
 
 #: (column, header, format) of the report's main table
 MAIN = (
@@ -34,6 +36,13 @@ MAIN = (
     ("event_tpr", "event TPR", "{:.3f}"),
     ("event_tnr", "event TNR", "{:.3f}"),
     ("event_auc", "event AUC", "{:.3f}"),
+    # trial events at the deployed operating point (slipkit.evaluate.events)
+    ("cost", "cost (per trial)", "{:.3f}"),
+    ("detected_rate", "slips detected", "{:.2f}"),
+    ("early_alarm_rate", "early alarms (trials)", "{:.2f}"),
+    ("delay_p90_ms", "delay (ms, p90)", "{:.1f}"),
+    ("threshold", "threshold", "{:.4g}"),
+    ("debounce_k", "debounce k", "{:.0f}"),
     # TacTip trial events (adapters.trial_events): first alarm within 2 frames of onset
     ("on_time_rate", "on time (<= 2 frames)", "{:.3f}"),
     ("no_early_alarm_rate", "no early alarm", "{:.3f}"),
@@ -122,6 +131,7 @@ NO_SPREAD = frozenset(
         "decision_frames",
         "disturbances",
         "n_slips",
+        "event_trials",
     }
 )
 
@@ -154,54 +164,203 @@ def margin_text(p99_us: float, budget_us: float, margin: float) -> str:
 
 
 def deploy_lines(
-    df: pd.DataFrame, primary: str, *, max_alarms_per_disturbance: float | None = None
+    df: pd.DataFrame,
+    primary: str,
+    *,
+    max_alarms_per_disturbance: float | None = None,
+    max_early_alarm_rate: float | None = None,
+    cost: Cost | None = None,
 ) -> list[str]:
     """The deploy decision of :func:`~slipkit.compare.table.choose_deploy` as Markdown lines.
 
-    ``max_alarms_per_disturbance`` (a comparison's ``verdict:``) is passed on to the
-    rule and printed beside the chosen row's own rate.
+    The limits (a comparison's ``verdict:``) are passed on to the rule and printed
+    beside the chosen row's own rates; with ``cost`` (a detection comparison) the
+    cost's weights and which trials chose the operating points are stated.
 
     The recommended estimator with its p99 / budget margin, or "no estimator meets the
-    budget" and the best-scoring one with its p99; then each higher-scoring estimator
-    passed over with its reason.
+    budget" and the best-scoring one with its p99; a tie within the spread over seeds
+    and what broke it; then each higher-scoring estimator passed over with its reason.
     """
     limit = max_alarms_per_disturbance
-    choice = choose_deploy(df, max_alarms_per_disturbance=limit)
+    choice = choose_deploy(
+        df,
+        max_alarms_per_disturbance=limit,
+        max_early_alarm_rate=max_early_alarm_rate,
+    )
     best = choice.row
     if best is None:
         return ["No estimator produced a score."]
     p99 = float(best["p99_us"])
-    cost = (
+    cost_text = (
         ", " + margin_text(p99, float(best["budget_p99_us"]), choice.margin)
         if math.isfinite(choice.margin)
         else f" ({best['export']})"
     )
     delay = (
-        f", median detection delay {best['delay_ms']:.1f} ms"
-        if math.isfinite(float(best["delay_ms"]))
-        else ""
-    ) + _disturbance_note(best, limit)
+        (
+            f", median detection delay {best['delay_ms']:.1f} ms"
+            if math.isfinite(float(best["delay_ms"]))
+            else ""
+        )
+        + _event_note(best, max_early_alarm_rate)
+        + _disturbance_note(best, limit)
+    )
     what = (
         f"`{best['estimator']}` ({best['kind']}, {best['class']}): {primary} "
-        f"{cell(best, primary, '{:.4g}')}{_over_seeds(best)}{cost}{delay}."
+        f"{cell(best, primary, '{:.4g}')}{_over_seeds(best)}{cost_text}{delay}."
     )
+    limits = [
+        name
+        for name, value in (
+            ("the early-alarm limit", max_early_alarm_rate),
+            ("the disturbance limit", limit),
+        )
+        if value is not None and _has(df, name)
+    ]
     out = (
         [f"**Deploy {what}**"]
         if choice.recommended
         else [
             "**No estimator meets the budget"
-            + ("" if limit is None else " and the disturbance limit")
+            + "".join(f" and {x}" for x in limits)
             + ".** The best-scoring "
             + ("exported " if best["export"] == "ok" else "")
             + f"one, not recommended: {what}"
         ]
     )
+    out += _tie_lines(choice)
     passed = [(e, w) for e, w in choice.passed_over if e != str(best["estimator"])]
+    if not choice.recommended:
+        own = [w for e, w in choice.passed_over if e == str(best["estimator"])]
+        if own:
+            out += ["", f"Not recommended: {own[0]}."]
     if passed:
-        out += ["", "Passed over (higher or equal score):", ""]
+        out += [
+            "",
+            "Passed over (higher or equal score):"
+            if choice.recommended
+            else "The others:",
+            "",
+        ]
         out += [f"- `{e}`: {w}{_load_note(df, e, w)}" for e, w in passed]
+    if cost is not None:
+        out += ["", *_cost_lines(df, cost, max_early_alarm_rate, limit)]
     out += ["", TIMING_RULE]
     return out
+
+
+def _has(df: pd.DataFrame, limit_name: str) -> bool:
+    """Whether any row defines the rate a limit holds (else the limit says nothing)."""
+    column = "early_alarm_rate" if "early" in limit_name else "alarms_per_disturbance"
+    return column in df and bool(
+        pd.to_numeric(df[column], errors="coerce").notna().any()
+    )
+
+
+def _tie_lines(choice: DeployChoice) -> list[str]:
+    """``Tie (within the spread over 3 seeds) with `b`, broken by lower delay (...)``."""
+    if not choice.tied:
+        return []
+    others = ", ".join(f"`{e}`" for e in choice.tied)
+    return [
+        "",
+        f"Tie (within the spread over {choice.n_seeds} seeds: the difference of the "
+        f"means is no larger than the larger standard deviation) with {others}, "
+        f"broken by {choice.tie_break}.",
+    ]
+
+
+def _event_note(row: pd.Series, limit: float | None) -> str:
+    """``; slips detected 90 %, early alarms 10 % of trials (limit 25 %), false alarms
+    0.8 /min`` (empty for a row without trial events)."""
+    rate = _float(row.get("early_alarm_rate"))
+    detected = _float(row.get("detected_rate"))
+    if not (math.isfinite(rate) or math.isfinite(detected)):
+        return ""
+    parts = []
+    if math.isfinite(detected):
+        parts.append(f"slips detected {detected * 100:.0f} %")
+    if math.isfinite(rate):
+        parts.append(
+            f"early alarms in {rate * 100:.0f} % of test trials"
+            + ("" if limit is None else f" (limit {limit * 100:g} %)")
+        )
+    fa = _float(row.get("false_alarms_per_min"))
+    if math.isfinite(fa):
+        parts.append(f"false alarms {fa:.3g} /min")
+    return "; " + ", ".join(parts)
+
+
+def _float(value: Any) -> float:
+    try:
+        return math.nan if value is None else float(value)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def _cost_lines(
+    df: pd.DataFrame,
+    cost: Cost,
+    max_early_alarm_rate: float | None,
+    max_alarms_per_disturbance: float | None,
+) -> list[str]:
+    """How a detection verdict is decided: the cost, the limits, which trials chose
+    each operating point, and slips of unknown onset."""
+    limits = [
+        f"early alarms in at most {v * 100:g} % of the test trials"
+        if k == "early"
+        else f"alarms on at most {v * 100:g} % of the disturbances"
+        for k, v in (
+            ("early", max_early_alarm_rate),
+            ("dist", max_alarms_per_disturbance),
+        )
+        if v is not None
+    ]
+    lines = [
+        "Ranked on the trial cost (lower is better), never on per-sample accuracy: per "
+        f"test trial a missed slip costs {cost.miss:g}, an alarm before the onset (any "
+        f"alarm in a trial without slip) {cost.early_alarm:g}, and a detection "
+        f"{cost.delay_ms:g} per ms of delay (at most a miss); the row's cost is the "
+        "mean over test trials. "
+        + (
+            "A row is passed over when it has "
+            + " or ".join(
+                x.replace(
+                    "early alarms in at most", "early alarms in more than"
+                ).replace("alarms on at most", "alarms on more than")
+                for x in limits
+            )
+            + "."
+            if limits
+            else "No limit on the rates."
+        )
+    ]
+    sources = []
+    if "operating_point_from" in df:
+        sources = [
+            str(v)
+            for v in dict.fromkeys(df["operating_point_from"])
+            if isinstance(v, str) and v
+        ]
+    if sources:
+        lines += [
+            "",
+            "Each operating point (threshold, debounce) was chosen by that cost on "
+            + "; ".join(f"`{x}`" for x in sources)
+            + " (the training side only); the test split was scored once, at it.",
+        ]
+    unknown = (
+        pd.to_numeric(df["unknown_onset_trials"], errors="coerce").max()
+        if "unknown_onset_trials" in df
+        else math.nan
+    )
+    if math.isfinite(float(unknown)) and unknown > 0:
+        lines += [
+            "",
+            f"{unknown:.0f} test slip(s) have an unknown onset: they are scored on "
+            "detected / not detected only (no early alarm, delay or false alarms).",
+        ]
+    return lines
 
 
 def _load_note(df: pd.DataFrame, estimator: str, why: str) -> str:
@@ -258,11 +417,20 @@ def _disturbance_note(row: pd.Series, limit: float | None) -> str:
 
 
 def verdict(
-    df: pd.DataFrame, primary: str, *, max_alarms_per_disturbance: float | None = None
+    df: pd.DataFrame,
+    primary: str,
+    *,
+    max_alarms_per_disturbance: float | None = None,
+    max_early_alarm_rate: float | None = None,
+    cost: Cost | None = None,
 ) -> list[str]:
     """Which estimator to deploy (:func:`deploy_lines`), and what each step along the Pareto front costs."""
     out = deploy_lines(
-        df, primary, max_alarms_per_disturbance=max_alarms_per_disturbance
+        df,
+        primary,
+        max_alarms_per_disturbance=max_alarms_per_disturbance,
+        max_early_alarm_rate=max_early_alarm_rate,
+        cost=cost,
     )
     if out == ["No estimator produced a score."]:
         return out
@@ -321,10 +489,12 @@ def write_report(
     split_note: str,
     summaries: Mapping[str, str],
     seconds: float,
-    verdict_limits: Mapping[str, float] | None = None,
+    verdict_limits: Mapping[str, float | None] | None = None,
+    cost: Cost | None = None,
 ) -> Path:
     """Write ``folder/report.md`` and return its path (``verdict_limits``: the checked
-    ``verdict:`` of the comparison, :func:`slipkit.compare.table.verdict_limits`)."""
+    ``verdict:`` of the comparison, :func:`slipkit.compare.table.verdict_limits`;
+    ``cost``: its trial cost when the comparison ranks on it)."""
     reg_cols = [
         c
         for c in df.columns
@@ -335,17 +505,17 @@ def write_report(
         "",
         description.strip(),
         "",
-        f"Estimators: {len(df)}; primary score: `{primary}` (higher is better"
+        f"Estimators: {len(df)}; primary score: `{primary}` "
         + (
-            ", so lower-is-better metrics are negated in `score`"
-            if primary in {"rmse", "smse"} or primary.startswith(("rmse", "smse"))
-            else ""
+            "(lower is better; `score` is its negative)"
+            if score_of({primary: 1.0}, primary) < 0
+            else "(higher is better)"
         )
-        + f"). {split_note} Wall time {seconds:.0f} s.",
+        + f". {split_note} Wall time {seconds:.0f} s.",
         "",
         "## Verdict",
         "",
-        *verdict(df, primary, **dict(verdict_limits or {})),
+        *verdict(df, primary, **dict(verdict_limits or {}), cost=cost),
         "",
         "## Accuracy",
         "",

@@ -13,6 +13,7 @@ from numpy.typing import ArrayLike
 
 from slipkit.compare.adapters import ROW_COLUMNS
 from slipkit.errors import SlipkitError
+from slipkit.evaluate.events import Cost, no_better_than_nothing, parse_cost
 
 #: columns of ``metrics.csv`` before the per-axis regression columns
 COLUMNS = (
@@ -35,12 +36,30 @@ COLUMNS = (
 
 #: primary columns where lower is better: the score is their negative
 LOWER_IS_BETTER = frozenset(
-    {"rmse", "smse", "delay_ms", "missed", "false_alarms_per_min", "fpr", "fnr"}
+    {
+        "rmse",
+        "smse",
+        "delay_ms",
+        "delay_p90_ms",
+        "missed",
+        "false_alarms_per_min",
+        "fpr",
+        "fnr",
+        "cost",
+        "early_alarm_rate",
+        "alarms_per_disturbance",
+    }
 )
 
 
-#: units of the primary metrics that carry one (rates and SMSE are dimensionless)
-METRIC_UNITS = {"delay_ms": "ms", "false_alarms_per_min": "1/min", "missed": "slips"}
+#: units of the primary metrics that carry one (rates and SMSE are dimensionless; the
+#: cost is in units of a missed slip)
+METRIC_UNITS = {
+    "delay_ms": "ms",
+    "delay_p90_ms": "ms",
+    "false_alarms_per_min": "1/min",
+    "missed": "slips",
+}
 #: units of a regression's per-axis columns ``rmse_<axis>`` (BioTac force, SlipTack speed)
 AXIS_UNITS = {"x": "N", "y": "N", "z": "N", "speed": "mm/s"}
 
@@ -168,15 +187,26 @@ class DeployChoice:
         True when ``row`` is exported and its p99 (us) meets its p99 budget (us).
     passed_over : tuple of (str, str)
         ``(estimator, reason)`` for each row that scores at least as high as ``row`` (ranked
-        before it) and was not chosen; with ``recommended`` False, ``row``'s own reason last.
+        before it) and was not chosen; with ``recommended`` False, every row's reason in
+        ranking order, ``row``'s own among them.
     margin : float
         ``row``'s p99 / p99 budget (dimensionless; NaN when not measured).
+    tied : tuple of str
+        The deployable rows whose ranking metric ties with ``row``'s (within the spread
+        over seeds, :func:`ties`), ``row`` excluded.
+    tie_break : str
+        What broke the tie (``lower delay (12 ms against 30 ms)``); "" without a tie.
+    n_seeds : int
+        Seeds the means are over (1: no ties are declared).
     """
 
     row: pd.Series | None
     recommended: bool
     passed_over: tuple[tuple[str, str], ...]
     margin: float
+    tied: tuple[str, ...] = ()
+    tie_break: str = ""
+    n_seeds: int = 1
 
     @property
     def borderline(self) -> bool:
@@ -185,19 +215,41 @@ class DeployChoice:
 
 
 def _rejection(
-    r: pd.Series, max_alarms_per_disturbance: float | None = None
+    r: pd.Series,
+    max_alarms_per_disturbance: float | None = None,
+    max_early_alarm_rate: float | None = None,
 ) -> str | None:
-    """Why ``r`` cannot be recommended (None when it can): not exported, firing on more
-    than ``max_alarms_per_disturbance`` of the test disturbances, or p99 over budget.
+    """Why ``r`` cannot be recommended (None when it can): not exported, a trial cost
+    no lower than no detector's (every slip missed), an early alarm in more than
+    ``max_early_alarm_rate`` of the test trials, firing on more than
+    ``max_alarms_per_disturbance`` of the test disturbances, or p99 over budget.
 
-    An exported row's disturbance rate is named before its p99: the rate is a property
-    of the estimator on the data, the p99 a measurement a busy machine can move, so the
-    reason a report gives for a knock-prone row does not change between re-runs.
+    An exported row's rates are named before its p99: a rate is a property of the
+    estimator on the data, the p99 a measurement a busy machine can move, so the reason
+    a report gives for a knock-prone row does not change between re-runs.
     """
     deploy = _deploy_rejection(r)
     if r.get("export") != "ok":
         return deploy
-    return _disturbance_rejection(r, max_alarms_per_disturbance) or deploy
+    return (
+        no_better_than_nothing({str(k): v for k, v in r.items()})
+        or _early_rejection(r, max_early_alarm_rate)
+        or _disturbance_rejection(r, max_alarms_per_disturbance)
+        or deploy
+    )
+
+
+def _early_rejection(r: pd.Series, limit: float | None) -> str | None:
+    """``early alarms in 71 % of test trials > 25 %`` when ``early_alarm_rate`` is above
+    ``limit``; None without a limit or where the rate is not defined."""
+    value = r.get("early_alarm_rate", math.nan)
+    try:
+        rate = math.nan if value is None else float(value)
+    except (TypeError, ValueError):
+        rate = math.nan
+    if limit is None or not math.isfinite(rate) or rate <= limit + 1e-12:
+        return None
+    return f"early alarms in {rate * 100:.0f} % of test trials > {limit * 100:g} %"
 
 
 def _disturbance_rejection(r: pd.Series, limit: float | None) -> str | None:
@@ -219,51 +271,67 @@ def disturbance_rate(r: pd.Series | dict[str, object]) -> float:
         return math.nan
 
 
-#: the keys a comparison's ``verdict:`` mapping may hold (limits on top of the budget)
-VERDICT_KEYS = ("max_alarms_per_disturbance",)
+#: the keys a comparison's ``verdict:`` mapping may hold: the cost of a detection
+#: comparison's trial events and the limits on top of the budget
+VERDICT_KEYS = ("cost", "max_early_alarm_rate", "max_alarms_per_disturbance")
+#: the limits a verdict applies when its ``verdict:`` does not name them (null: none)
+DEFAULT_LIMITS: dict[str, float | None] = {"max_early_alarm_rate": 0.25}
 
 
 def verdict_limits(
     node: Mapping[str, Any] | None, where: str = "comparison.verdict"
-) -> dict[str, float]:
-    """A comparison's ``verdict:`` mapping checked, as keyword arguments of
+) -> dict[str, float | None]:
+    """A comparison's ``verdict:`` mapping checked; its limits as keyword arguments of
     :func:`choose_deploy`.
 
-    ``max_alarms_per_disturbance``: a fraction in [0, 1] (``0.10``: a row that fires on
-    more than 10 % of the test disturbances is passed over); null or absent: no limit.
+    ``max_early_alarm_rate`` (default 0.25): a row with an early alarm in more than that
+    share of the test trials is passed over; ``max_alarms_per_disturbance``: a row that
+    fires on more than that share of the test disturbances is passed over; null: no
+    limit. ``cost`` (the trial cost's weights, :func:`verdict_cost`) is checked here
+    too but is not a limit. A row where a rate is not defined is not held to it.
 
     Raises
     ------
     SlipkitError
-        Not a mapping, an unknown key, or a limit that is not a number in [0, 1];
-        the message names ``where`` and the key.
+        Not a mapping, an unknown key, a limit that is not a number in [0, 1], or a
+        bad cost; the message names ``where`` and the key.
     """
+    out: dict[str, float | None] = dict(DEFAULT_LIMITS)
     if node is None:
-        return {}
+        return out
     if not isinstance(node, Mapping):
         raise SlipkitError(
             f"{where}: must be a mapping such as {{max_alarms_per_disturbance: 0.10}}; "
             f"got {node!r}"
         )
-    out: dict[str, float] = {}
     for key, value in node.items():
         if key not in VERDICT_KEYS:
             raise SlipkitError(
-                f"{where}.{key}: unknown verdict limit; known: {list(VERDICT_KEYS)}"
+                f"{where}.{key}: unknown verdict key; known: {list(VERDICT_KEYS)}"
             )
-        if value is None:
+        if key == "cost":
+            verdict_cost(node, where)
             continue
-        if (
+        if value is not None and (
             isinstance(value, bool)
             or not isinstance(value, int | float)
             or not 0.0 <= float(value) <= 1.0
         ):
             raise SlipkitError(
-                f"{where}.{key}: must be a fraction in [0, 1] (0.10 = 10 % of the "
-                f"disturbances) or null; got {value!r}"
+                f"{where}.{key}: must be a fraction in [0, 1] (0.10 = 10 %) or null; "
+                f"got {value!r}"
             )
-        out[str(key)] = float(value)
+        out[str(key)] = None if value is None else float(value)
     return out
+
+
+def verdict_cost(
+    node: Mapping[str, Any] | None, where: str = "comparison.verdict"
+) -> Cost:
+    """The trial cost's weights of a comparison's ``verdict:`` (``cost: {miss,
+    early_alarm, delay_ms}``; absent: :class:`slipkit.evaluate.events.Cost`'s defaults)."""
+    node = node if isinstance(node, Mapping) else {}
+    return parse_cost(node.get("cost"), f"{where}.cost")
 
 
 def _deploy_rejection(r: pd.Series) -> str | None:
@@ -291,49 +359,150 @@ def _deploy_rejection(r: pd.Series) -> str | None:
 
 
 def choose_deploy(
-    df: pd.DataFrame, *, max_alarms_per_disturbance: float | None = None
+    df: pd.DataFrame,
+    *,
+    max_alarms_per_disturbance: float | None = None,
+    max_early_alarm_rate: float | None = None,
 ) -> DeployChoice:
-    """The deploy rule: the highest score among exported rows whose p99 meets the budget.
+    """The deploy rule: the best score among exported rows within the limits and the budget.
 
-    Rows are ranked by ``score`` (higher first), ties by p99 (lower first), then table
-    order. An over-budget or unexported row is never recommended, nor, with
-    ``max_alarms_per_disturbance``, one that fires on a larger fraction of the test
-    disturbances; each one ranked above the choice is listed with its reason. When no
-    row qualifies, the best-scoring exported row (else the best-scoring row) is
-    returned with ``recommended`` False.
+    Rows are ranked by ``score`` (higher first; a detection comparison's score is minus
+    its trial cost), ties by p99 (lower first), then table order. An over-budget or
+    unexportable row is never recommended, nor one over a limit (an early alarm in more
+    than ``max_early_alarm_rate`` of the test trials, firing on more than
+    ``max_alarms_per_disturbance`` of the test disturbances); each one ranked above the
+    choice is listed with its reason. Among the rows that qualify, those whose ranking
+    metric ties with the best one's (over several seeds: within the spread,
+    :func:`ties`) are one tie, broken by :data:`TIE_BREAKERS` (earlier, fewer false
+    alarms, cheaper per frame). When no row qualifies, the best-scoring exported row
+    (else the best-scoring row) is returned with ``recommended`` False.
 
     Parameters
     ----------
     df : pandas.DataFrame
         A :func:`build_table` table (``score``, ``export``, ``p99_us``, ``budget_p99_us``,
-        ``alarms_per_disturbance`` where the data marks disturbances).
-    max_alarms_per_disturbance : float or None
-        Largest fraction (0..1) of disturbances a recommended row may fire on (a
-        comparison's ``verdict:``, :func:`verdict_limits`); None: no limit. A row
-        without a disturbance count is not held to it.
+        the rates where the data defines them; with seeds ``<primary>_std``).
+    max_alarms_per_disturbance, max_early_alarm_rate : float or None
+        The comparison's limits (fractions 0..1, :func:`verdict_limits`); None: no
+        limit. A row where the rate is not defined is not held to it.
 
     Returns
     -------
     DeployChoice
     """
+    n_seeds = _n_seeds(df)
     scored = df[np.isfinite(df["score"].to_numpy(float))]
     if scored.empty:
-        return DeployChoice(None, False, (), math.nan)
+        return DeployChoice(None, False, (), math.nan, n_seeds=n_seeds)
     ranked = (
         scored.assign(_c=scored["p99_us"].astype(float).fillna(np.inf))
         .sort_values(["score", "_c"], ascending=[False, True], kind="stable")
         .drop(columns="_c")
     )
     passed: list[tuple[str, str]] = []
+    eligible: list[pd.Series] = []
     for _, r in ranked.iterrows():
-        why = _rejection(r, max_alarms_per_disturbance)
+        why = _rejection(r, max_alarms_per_disturbance, max_early_alarm_rate)
         if why is None:
-            return DeployChoice(r, True, tuple(passed), _margin(r))
-        passed.append((str(r["estimator"]), why))
+            eligible.append(r)
+        elif not eligible:
+            passed.append((str(r["estimator"]), why))
+    if eligible:
+        primary = str(df.attrs.get("primary", ""))
+        best = eligible[0]
+        tied = [r for r in eligible[1:] if ties(best, r, primary)]
+        chosen, broken_by = break_tie([best, *tied])
+        others = tuple(
+            str(r["estimator"])
+            for r in [best, *tied]
+            if str(r["estimator"]) != str(chosen["estimator"])
+        )
+        return DeployChoice(
+            chosen,
+            True,
+            tuple(passed),
+            _margin(chosen),
+            tied=others,
+            tie_break=broken_by if others else "",
+            n_seeds=n_seeds,
+        )
     exported = np.flatnonzero(ranked["export"].eq("ok").to_numpy())
     pos = int(exported[0]) if len(exported) else 0
     row = ranked.iloc[pos]
-    return DeployChoice(row, False, tuple(passed[: pos + 1]), _margin(row))
+    # nothing qualifies: every row's reason, the shown row's own among them
+    return DeployChoice(row, False, tuple(passed), _margin(row), n_seeds=n_seeds)
+
+
+#: what breaks a tie, in order: (column, what lower means, unit)
+TIE_BREAKERS = (
+    ("delay_ms", "lower delay", "ms"),
+    ("early_alarm_rate", "fewer early alarms", "%"),
+    ("false_alarms_per_min", "fewer false alarms", "/min"),
+    ("p99_us", "cheaper per frame (p99)", "us"),
+)
+
+
+def _n_seeds(df: pd.DataFrame) -> int:
+    if "n_seeds" not in df or df.empty:
+        return 1
+    n = pd.to_numeric(df["n_seeds"], errors="coerce").max()
+    return int(n) if math.isfinite(float(n)) else 1
+
+
+def _value(r: pd.Series, column: str) -> float:
+    value = r.get(column, math.nan)
+    try:
+        return math.nan if value is None else float(value)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def ties(a: pd.Series, b: pd.Series, primary: str) -> bool:
+    """Whether rows ``a`` and ``b`` tie on the ranking metric ``primary``: over several
+    seeds, ``|mean_a - mean_b| <= max(std_a, std_b)`` (the seeds' spread); with one seed
+    (no ``<primary>_std``) never."""
+    if not primary:
+        return False
+    sa, sb = _value(a, f"{primary}_std"), _value(b, f"{primary}_std")
+    if not (math.isfinite(sa) or math.isfinite(sb)):
+        return False
+    spread = max(v for v in (sa, sb) if math.isfinite(v))
+    ma, mb = _value(a, primary), _value(b, primary)
+    return bool(math.isfinite(ma) and math.isfinite(mb) and abs(ma - mb) <= spread)
+
+
+def _shown(v: float, unit: str) -> str:
+    if not math.isfinite(v):
+        return "none"
+    return f"{v * 100:.0f} %" if unit == "%" else f"{v:.3g} {unit}"
+
+
+def break_tie(rows: Sequence[pd.Series]) -> tuple[pd.Series, str]:
+    """The row that wins a tie by :data:`TIE_BREAKERS`, and what broke it.
+
+    Each breaker in turn keeps the rows of the lowest value (a row without the value
+    loses to one with it); the first breaker that leaves fewer rows is named, e.g.
+    ``lower delay (12 ms against 30 ms for `b`)``; none: the higher score (table order).
+    """
+    left = list(rows)
+    for column, what, unit in TIE_BREAKERS:
+        vals = [_value(r, column) for r in left]
+        finite = [v for v in vals if math.isfinite(v)]
+        if not finite:
+            continue
+        low = min(finite)
+        keep = [r for r, v in zip(left, vals, strict=True) if v == low]
+        if len(keep) < len(left):
+            runner = next(
+                (r for r, v in zip(left, vals, strict=True) if v != low), left[0]
+            )
+            other = _value(runner, column)
+            return keep[0], (
+                f"{what} ({_shown(low, unit)} against {_shown(other, unit)} for "
+                f"`{runner['estimator']}`)"
+            )
+        left = keep
+    return left[0], "the higher mean score (every tie-breaker equal)"
 
 
 def _margin(r: pd.Series) -> float:
@@ -458,6 +627,11 @@ def seed_table(
             for part in ("std", "ci"):
                 row[f"{c}_{part}"] = st[f"{c}_{part}"]
             row[c] = st[f"{c}_mean"]
+        for c in per_seed.columns:  # text (e.g. operating_point_from): each value once
+            if c not in row and c not in numeric and c not in _NOT_AVERAGED:
+                seen = [str(v) for v in dict.fromkeys(g[c]) if isinstance(v, str)]
+                if seen:
+                    row[c] = " | ".join(seen)
         lat = np.asarray(latencies.get(str(est), np.zeros(0)), dtype=np.float64)
         if not bad and len(lat):
             p99 = block_p99(lat)
@@ -476,23 +650,33 @@ def seed_table(
 
 
 def best_row(
-    df: pd.DataFrame, *, max_alarms_per_disturbance: float | None = None
+    df: pd.DataFrame,
+    *,
+    max_alarms_per_disturbance: float | None = None,
+    max_early_alarm_rate: float | None = None,
 ) -> pd.Series | None:
     """The row :func:`choose_deploy` returns (recommended or, when none meets the budget, shown)."""
-    return choose_deploy(df, max_alarms_per_disturbance=max_alarms_per_disturbance).row
+    return choose_deploy(
+        df,
+        max_alarms_per_disturbance=max_alarms_per_disturbance,
+        max_early_alarm_rate=max_early_alarm_rate,
+    ).row
 
 
 __all__ = [
     "AXIS_UNITS",
     "BORDERLINE",
     "COLUMNS",
+    "DEFAULT_LIMITS",
     "LOWER_IS_BETTER",
     "METRIC_UNITS",
     "P99_BLOCKS",
+    "TIE_BREAKERS",
     "VERDICT_KEYS",
     "DeployChoice",
     "best_row",
     "block_p99",
+    "break_tie",
     "build_table",
     "choose_deploy",
     "disturbance_rate",
@@ -503,5 +687,7 @@ __all__ = [
     "quiet_p99",
     "score_of",
     "seed_table",
+    "ties",
+    "verdict_cost",
     "verdict_limits",
 ]

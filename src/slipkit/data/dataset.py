@@ -28,7 +28,8 @@ STREAM_KINDS: tuple[str, ...] = ("sampled", "events", "snapshot")
 
 #: Label names with a fixed meaning across slipkit (any other name is allowed).
 STANDARD_LABELS: dict[str, str] = {
-    "slip_onset_s": "true slip onset, s from the trial start (NaN: no slip, or onset not recorded: the dataset's label description says which)",
+    "slip_onset_s": "true slip onset, s from the trial start (NaN: no slip, or onset not recorded: the label 'slipped' says which)",
+    "slipped": "did the trial slip: 1 or 0 (NaN: unknown); without this label a NaN onset means no slip",
     "reference_onset_s": "onset seen by a late reference sensor (e.g. object IMU), s",
     "slip_class": "class of the trial (e.g. linear / rotational / touch)",
 }

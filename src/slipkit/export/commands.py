@@ -322,19 +322,24 @@ def export_main(cfg: DictConfig) -> Path:
         )
     # The sensor's nominal rate stands in for a stream without its own rate_hz.
     nominal = deploy_config(cfg, str(dataset.sensor))
+    # debounce_k: null deploys the run's own choice (its operating point, chosen on
+    # validation trials), else the task's
+    debounce = cfg.get("debounce_k")
+    if debounce is None:
+        debounce = (run.metrics.get("operating_point") or {}).get("debounce_k")
     options = {
         "positive": cfg.get("positive"),
         "slip_classes": _names(cfg, "slip_classes"),
         "no_slip_classes": _names(cfg, "no_slip_classes"),
         "fallback_rate_hz": 1000.0 / nominal["frame_period"],
-        "debounce_k": cfg.get("debounce_k"),
+        "debounce_k": debounce,
         "regression": OmegaConf.to_container(cfg.regression, resolve=True)
         if cfg.get("regression") is not None
         else None,
     }
     dep = deployment(task, run, dataset, options)
-    if cfg.get("debounce_k") is not None:
-        dep.debounce_k = int(cfg.debounce_k)
+    if debounce is not None:
+        dep.debounce_k = int(debounce)
     model = run.model if dep.model is None else dep.model
     graph = export(model, opset=int(cfg.get("opset", 17)), **dep.export_options)
     input_shape = [int(s) for s in graph.input_shape[1:]]

@@ -21,6 +21,7 @@ import pandas as pd
 
 from slipkit.data.dataset import STANDARD_LABELS, Dataset, LabelSpec, StreamSpec
 from slipkit.errors import SourceFormatError
+from slipkit.evaluate.events import SLIPPED_LABEL
 
 __all__ = [
     "check_header",
@@ -392,6 +393,8 @@ def read_csv_dataset(
     delimiter: str = ",",
     decimal: str = ".",
     encoding: str = "utf-8",
+    slipped_column: str | None = None,
+    nan_onset: str = "unknown",
 ) -> Dataset:
     """Read CSV files with a header line into a one-stream dataset.
 
@@ -445,6 +448,13 @@ def read_csv_dataset(
         Decimal mark, one character (``","`` for decimal commas).
     encoding : str
         Text encoding of the files (``"utf-8"``, ``"latin-1"``, ``"cp1252"``...).
+    slipped_column : str, optional
+        Column saying whether the trial slipped (1 / 0, empty: unknown), constant
+        within a trial; it becomes the label ``slipped``, apart from when
+        (``slip_onset_s``, whose NaN is then an unknown onset of a slip).
+    nan_onset : {"unknown", "no_slip"}
+        Without ``slipped_column``, what an empty ``slip_onset_s`` means: ``unknown``
+        (the label ``slipped`` is NaN there) or ``no_slip`` (0); a known onset is 1.
 
     Returns
     -------
@@ -477,6 +487,17 @@ def read_csv_dataset(
     # Hydra reads a column named 5 as the number 5; the header's names are text
     time_column = None if time_column is None else str(time_column)
     trial_column = None if trial_column is None else str(trial_column)
+    if nan_onset not in ("unknown", "no_slip"):
+        raise SourceFormatError(
+            f"nan_onset is {nan_onset!r}; expected 'unknown' or 'no_slip' (what an "
+            "empty slip_onset_s means)"
+        )
+    if slipped_column is None and SLIPPED_LABEL in label_columns:
+        slipped_column = SLIPPED_LABEL  # a label of that name says it, not the onset
+    label_columns = [
+        *(c for c in label_columns if c != slipped_column),
+        *([slipped_column] if slipped_column else []),
+    ]
     roles = _Roles(time_column, trial_column, label_columns, group_columns)
     classes = {
         str(k): tuple(str(c) for c in v) for k, v in (class_labels or {}).items()
@@ -649,7 +670,14 @@ def read_csv_dataset(
     labels = {
         name: _label_spec(name, trials, classes.get(name), units, where)
         for name in roles.labels
+        if name != slipped_column
     }
+    slipped = _slipped(trials, slipped_column, nan_onset, where)
+    if slipped is not None:
+        if slipped_column is not None:
+            trials = trials.drop(columns=slipped_column)
+        trials[SLIPPED_LABEL] = slipped
+        labels[SLIPPED_LABEL] = LabelSpec(SLIPPED_LABEL)
     return Dataset(
         sensor=sensor,
         streams={stream: spec},
@@ -673,6 +701,8 @@ def read_csv_dataset(
                 "trial_column": trial_column,
                 "label_columns": list(roles.labels),
                 "group_columns": list(roles.groups),
+                "slipped_column": slipped_column,
+                "nan_onset": nan_onset,
             },
         },
         name=path.stem if path.is_file() else path.resolve().name,
@@ -784,6 +814,47 @@ def _rate(rate_hz: float | None, steps: list[np.ndarray], path: Path) -> float:
             "two distinct times); give rate_hz"
         )
     return float(round(1.0 / float(np.median(dt)), 6))
+
+
+def _slipped(
+    trials: pd.DataFrame,
+    column: str | None,
+    nan_onset: str,
+    where: Mapping[str, tuple[Path, int]],
+) -> np.ndarray | None:
+    """The ``slipped`` label per trial (1, 0, NaN: unknown), or None when the data says
+    nothing of slip (no ``slipped_column`` and no ``slip_onset_s``).
+
+    From ``column`` (values 0 / 1 / empty; 0 beside a known onset is refused), else from
+    ``slip_onset_s``: 1 where known, ``nan_onset`` (NaN or 0) where empty.
+    """
+    onset = (
+        pd.to_numeric(trials["slip_onset_s"], errors="coerce").to_numpy(np.float64)
+        if "slip_onset_s" in trials
+        else None
+    )
+    if column is None:
+        if onset is None:
+            return None
+        empty = 0.0 if nan_onset == "no_slip" else np.nan
+        return np.where(np.isfinite(onset), 1.0, empty)
+    values = pd.to_numeric(trials[column], errors="coerce").to_numpy(np.float64)
+    for k, (raw, v) in enumerate(zip(trials[column], values, strict=True)):
+        known = not pd.isna(raw)
+        bad = known and v not in (0.0, 1.0)
+        contradiction = v == 0.0 and onset is not None and bool(np.isfinite(onset[k]))
+        if bad or contradiction:
+            file, line = where[str(trials["trial_id"].iloc[k])]
+            raise SourceFormatError(
+                f"{file}: line {line}, column {column!r} (slipped_column): "
+                + (
+                    f"{_id_text(raw)} is not 1 (slipped), 0 (did not slip) or empty (unknown)"
+                    if bad
+                    else "0 (did not slip) beside a slip_onset_s of "
+                    f"{onset[k]:g} s; a trial with an onset slipped"  # type: ignore[index]
+                )
+            )
+    return values
 
 
 def _label_spec(

@@ -6,6 +6,9 @@ onset label, Sec. 4.3, to the first ground-truth frame with no contact); TP / FP
 counted per bin (TN ignored), precision, sensitivity and F1 follow (eqs. 1-3), and the
 latency is the time from the onset to the first true-positive detection. Like the paper's
 Table 1, the headline is the mean over trials (experiments); pooled counts are reported too.
+Beside the bins, the trial events of every detection comparison
+(:mod:`slipkit.evaluate.events`, ``test.operating_point``): each frame the detector
+declares slip is an alarm (the rule's own decision, debounce 1), against the onset.
 The detector has nothing to learn, so ``fit`` only checks it on the training trials and
 every number comes from the held-out ones.
 """
@@ -25,6 +28,13 @@ from slipkit.baselines.davis import bin_scores, contact_end, prf
 from slipkit.data.dataset import Dataset, Trial
 from slipkit.data.splits import split_by_trial
 from slipkit.errors import SlipkitError
+from slipkit.evaluate.events import (
+    Cost,
+    TrialTruth,
+    evaluate_point,
+    events_table,
+    slipped_of,
+)
 from slipkit.train.task import Task, TaskResult
 
 log = logging.getLogger("slipkit.davis")
@@ -207,6 +217,26 @@ class DavisRelease(Task):
         out["by_group"] = {str(g): block(p) for g, p in table.groupby("group")}
         return out
 
+    def trial_events(
+        self, dataset: Dataset, frames: pd.DataFrame
+    ) -> tuple[dict[str, Any], pd.DataFrame]:
+        """The trial events of the detector's slip frames (an alarm at the end of every
+        frame it declares slip, debounce 1; :mod:`slipkit.evaluate.events`): the
+        ``operating_point`` summary and the per-trial table."""
+        truths, scores = [], []
+        for trial in dataset:
+            f = frames[frames["trial_id"] == trial.trial_id] if len(frames) else frames
+            t = f["t_end_s"].to_numpy(np.float64) if len(f) else np.empty(0)
+            onset = float(trial.labels.get(self.label, np.nan))
+            onset = onset if np.isfinite(onset) else np.nan
+            truths.append(
+                TrialTruth(trial.trial_id, t, slipped_of(trial.labels, onset), onset)
+            )
+            scores.append(f["slip"].to_numpy(np.float64) if len(f) else np.empty(0))
+        summary, events = evaluate_point(truths, scores, 0.5, 1, Cost())
+        point = {"threshold": float("nan"), "debounce_k": 1, **summary}
+        return point, events_table(events, Cost())
+
     def fit(self, model: Any, dataset: Dataset, *, seed: int, out: Path) -> TaskResult:
         split = split_by_trial(dataset, test_size=self.test_size, seed=seed)
         train, _, test = split.apply(dataset)
@@ -221,6 +251,8 @@ class DavisRelease(Task):
         table, frames = self.trial_table(model, test)
         table.to_csv(out / "davis_trials.csv", index=False)
         frames.to_csv(out / "test_frames.csv", index=False)
+        point, events = self.trial_events(test, frames)
+        events.to_csv(out / "test_events.csv", index=False)
         metrics = {
             "split": {"train": list(split.train), "test": list(split.test)},
             "bin_s": self.bin_s,
@@ -233,7 +265,12 @@ class DavisRelease(Task):
                 "training trials",
                 **self.summarise(self.trial_table(model, train)[0]),
             },
-            "test": self.summarise(table),
+            "test": {**self.summarise(table), "operating_point": point},
+            "operating_point": {
+                "threshold": None,
+                "debounce_k": 1,
+                "from": "fixed: the detector's own rule, debounce 1",
+            },
         }
         return TaskResult(model, metrics, _summary(metrics))
 
@@ -241,7 +278,12 @@ class DavisRelease(Task):
         table, frames = self.trial_table(model, dataset)
         table.to_csv(out / "davis_trials.csv", index=False)
         frames.to_csv(out / "frames.csv", index=False)
-        return {"paper": PAPER, "test": self.summarise(table)}
+        point, events = self.trial_events(dataset, frames)
+        events.to_csv(out / "events.csv", index=False)
+        return {
+            "paper": PAPER,
+            "test": {**self.summarise(table), "operating_point": point},
+        }
 
 
 def _summary(metrics: Mapping[str, Any]) -> list[str]:

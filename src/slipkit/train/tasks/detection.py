@@ -4,8 +4,8 @@
 channels, in time order, one recording per trial, ``segments`` = trial) and per-sample
 labels ``y``: a truth-stream column (``truth_column``, e.g. the FSR scene's
 ``slip_event``) or the onset label (``t >= slip_onset_s``). Trials are split in halves
-(by trial); ``fit`` lets the detector choose its threshold on the training half's ROC
-(or record the ROC of a fixed one) and every side is scored:
+(by trial, or by a group column with ``split: group``); ``fit`` chooses the operating
+point on validation trials (below) and every side is scored:
 
 * **samples** -- AUC and TPR/TNR/FPR/FNR per sample (the base detector's calibration);
 * **events** -- as the FSR paper counts (30 induced slips, specificity over non-slip
@@ -22,12 +22,21 @@ labels ``y``: a truth-stream column (``truth_column``, e.g. the FSR scene's
 * **latency** -- first detection at or after the onset, in ms, per trial; with
   ``reference_label`` (the BioTac scene's IMU onset) the lead (-) or lag (+) against it,
   mean +- sd overall and per group (``group_by``), beside the paper's figures.
-* **operating point** -- what the deployed detector does at its threshold (a bundle
-  decides ``score >= threshold`` with debounce 1 unless ``slipkit export debounce_k=``
-  says otherwise): slips detected (trials), alarms before the onset (trials), false
-  alarms per minute of non-slip data (fired non-slip event units, as ``slipkit
-  compare`` counts them) and the median delay. ``slipkit train`` and ``slipkit
-  evaluate`` print it first.
+* **operating point** -- the threshold and debounce ``k`` the detector is deployed
+  with, chosen on validation trials (``operating_point``): each detector's clones are
+  fitted on ``cv`` - 1 folds of the training trials (group k-fold by the dataset's
+  group column, e.g. ``object``, when it has one, else by trial) and score the
+  held-out fold; on these out-of-fold scores every point of a grid (threshold
+  quantiles plus each clone's own ROC choice, x the debounce candidates) is scored on
+  the trial events of :mod:`slipkit.evaluate.events`, and the point of lowest mean
+  cost within the limits (early alarms, alarms per disturbance) is kept. The detector
+  is then fitted on all training trials with that threshold (a threshold fixed in its
+  config stays; only ``k`` is chosen) and carries ``k`` as ``debounce_k_``; the test
+  trials are scored once, there: slips detected, early alarms, false alarms per
+  minute, alarms per disturbance, median and p90 delay, cost. ``metrics.json``
+  records where the point came from (``operating_point``: the trials it was chosen
+  on, never the test split's); ``slipkit train`` and ``slipkit evaluate`` print it
+  first.
 
 ``compare`` adds detectors scored the same way beside the run's estimator, each on its
 own stream (the BioTac pressure detector reads ``pac`` at 2.2 kHz, the force derivative
@@ -60,8 +69,21 @@ from sklearn.metrics import roc_auc_score, roc_curve
 
 from slipkit.baselines.base import segment_bounds
 from slipkit.data.dataset import Dataset
-from slipkit.data.splits import split_by_trial
+from slipkit.data.splits import TrialSplit, split_by_group, split_by_trial
 from slipkit.errors import SlipkitError
+from slipkit.evaluate.events import (
+    MINIMISED,
+    Cost,
+    Limits,
+    OperatingPoint,
+    TrialTruth,
+    choose_operating_point,
+    evaluate_point,
+    events_table,
+    parse_operating_point,
+    slipped_of,
+    threshold_grid,
+)
 from slipkit.train.search import mean_leaves
 from slipkit.train.task import Task, TaskResult
 
@@ -91,6 +113,9 @@ class Recordings:
         Disturbance samples (a truth column), if asked for.
     rate_hz : float
         The stream's sample rate (Hz).
+    slipped : list of bool or None, optional
+        Per trial: did it slip (None: unknown; :func:`slipkit.evaluate.events.slipped_of`).
+        Not given: a trial slipped when its onset is known.
     """
 
     X: FloatArray
@@ -103,10 +128,46 @@ class Recordings:
     reference_s: FloatArray
     disturbance: NDArray[np.bool_] | None
     rate_hz: float
+    slipped: list[bool | None] | None = None
 
     def bounds(self) -> list[tuple[int, int]]:
         """(start, stop) of every trial's samples."""
         return segment_bounds(len(self.X), self.segments)
+
+    def truths(self) -> list[TrialTruth]:
+        """Each trial's truth for :mod:`slipkit.evaluate.events` (slip samples from ``y``,
+        disturbances as intervals of the disturbance samples)."""
+        out = []
+        for k, (a, b) in enumerate(self.bounds()):
+            t = self.t[a:b]
+            onset = float(self.onset_s[k])
+            slipped = (
+                self.slipped[k] if self.slipped is not None else math.isfinite(onset)
+            )
+            dist: tuple[tuple[float, float], ...] = ()
+            if self.disturbance is not None:
+                dist = tuple(
+                    (float(t[r0]), float(t[r1 - 1]))
+                    for r0, r1 in _runs(self.disturbance[a:b])
+                )
+            out.append(
+                TrialTruth(
+                    self.trial_ids[k],
+                    t,
+                    slipped,
+                    onset,
+                    # unknown onset of a slip: no slip samples to tell time apart
+                    slip=self.y[a:b] > 0
+                    if slipped is False or math.isfinite(onset)
+                    else None,
+                    disturbances=dist,
+                )
+            )
+        return out
+
+    def per_trial(self, scores: FloatArray) -> list[FloatArray]:
+        """``scores`` cut into one array per trial."""
+        return [scores[a:b] for a, b in self.bounds()]
 
 
 def _runs(flags: NDArray[np.bool_]) -> list[tuple[int, int]]:
@@ -198,6 +259,18 @@ class StreamDetection(Task):
         Trial group column (e.g. ``object``) for per-group latency.
     test_size : float
         Fraction of trials held out for the test side.
+    split : {"trial", "group", "auto"}
+        The test split: by trial, by ``group`` (every group on one side), or by group
+        when the dataset has the group column with two values or more, else by trial.
+    group : str or None
+        The trials column naming a trial's group (e.g. ``object``) for ``split`` and
+        for the validation folds; None: ``object`` when the dataset has it.
+    operating_point : mapping or None
+        How the deployed (threshold, debounce) is chosen on validation trials:
+        ``debounce`` (candidate k), ``thresholds`` (quantiles of the out-of-fold
+        scores), ``cost`` (``{miss, early_alarm, delay_ms}``), ``max_early_alarm_rate``,
+        ``max_alarms_per_disturbance`` (:mod:`slipkit.evaluate.events`); None: the
+        detector's own threshold (its ROC or config) with debounce 1.
     name, unit : str
         How the summary names the estimator and its threshold's unit.
     paper : mapping or None
@@ -208,10 +281,12 @@ class StreamDetection(Task):
         (``detector`` an estimator or a ``_target_`` mapping).
     objective : str
         Metrics key returned to a sweeper (dots descend): a ``validation.*`` key, the
-        main detector refitted by ``cv``-fold group CV by trial on the training half
-        and scored on the held-out fold (mean over folds), never the test half.
+        main detector refitted by ``cv``-fold group CV on the training side and scored
+        on the held-out fold (mean over folds; ``validation.operating_point.*``: the
+        chosen point on the pooled out-of-fold scores), never the test side. A cost,
+        delay or rate is minimised, anything else maximised.
     cv : int
-        Folds of that validation (fewer when the training half has fewer trials).
+        Folds of that validation (fewer when the training side has fewer groups).
     """
 
     objective = "validation.samples.auc"
@@ -233,6 +308,9 @@ class StreamDetection(Task):
         reference_label: str | None = None,
         group_by: str | None = None,
         test_size: float = 0.5,
+        split: str = "trial",
+        group: str | None = None,
+        operating_point: Mapping[str, Any] | None = None,
         name: str = "detector",
         unit: str = "",
         paper: Mapping[str, Any] | None = None,
@@ -243,6 +321,10 @@ class StreamDetection(Task):
         if roc_unit not in ("sample", "event"):
             raise SlipkitError(
                 f"task.roc_unit must be 'sample' or 'event'; got {roc_unit!r}"
+            )
+        if split not in ("trial", "group", "auto"):
+            raise SlipkitError(
+                f"task.split must be 'trial', 'group' or 'auto'; got {split!r}"
             )
         if (truth_column is None) != (truth_stream is None):
             raise SlipkitError("task.truth_stream and task.truth_column go together")
@@ -261,11 +343,15 @@ class StreamDetection(Task):
         self.reference_label = reference_label
         self.group_by = group_by
         self.test_size = float(test_size)
+        self.split = split
+        self.group = group
+        self.operating_point = parse_operating_point(operating_point)
         self.name = name
         self.unit = unit
         self.paper = dict(paper or {})
         self.compare = [dict(c) for c in (compare or [])]
         self.objective = objective
+        self.direction = _direction(objective)
         self.cv = cv
 
     # -- data -------------------------------------------------------------------------
@@ -302,6 +388,7 @@ class StreamDetection(Task):
         chans = list(channels) if channels is not None else list(spec.channels)
         Xs, ys, ts, segs, dists = [], [], [], [], []
         ids, groups, onsets, refs = [], [], [], []
+        slipped: list[bool | None] = []
         for k, trial in enumerate(dataset):
             df = trial.streams.get(stream)
             if df is None:
@@ -347,6 +434,11 @@ class StreamDetection(Task):
                 str(trial.meta.get(self.group_by, "")) if self.group_by else ""
             )
             onsets.append(onset)
+            slipped.append(
+                bool(y[:keep].any())
+                if self.truth_column is not None
+                else slipped_of(trial.labels, onset)
+            )
             ref = (
                 float(trial.labels.get(self.reference_label, np.nan))
                 if self.reference_label
@@ -370,6 +462,7 @@ class StreamDetection(Task):
             reference_s=np.asarray(refs, dtype=np.float64),
             disturbance=np.concatenate(dists) if dists else None,
             rate_hz=float(rate),
+            slipped=slipped,
         )
 
     # -- event units --------------------------------------------------------------------
@@ -410,18 +503,38 @@ class StreamDetection(Task):
         rec: Recordings,
         *,
         extra_thresholds: Mapping[str, float] | None = None,
+        debounce_k: int | None = None,
     ) -> tuple[dict[str, Any], pd.DataFrame, dict[str, Any]]:
-        """Metrics, a per-trial table and the ROC curves of a fitted detector."""
+        """Metrics, the per-trial events table and the ROC curves of a fitted detector.
+
+        The trial events (``operating_point``, the table) are at the detector's
+        threshold with ``debounce_k`` (None: the detector's ``debounce_k_``, else 1);
+        the per-sample, event-unit and trial counts at its threshold sample by sample.
+        """
         scores = np.asarray(detector.decision_function(rec.X, segments=rec.segments))
         thr = float(detector.threshold_)
-        metrics = self._at_threshold(rec, scores, thr)
+        k = int(
+            debounce_k
+            if debounce_k is not None
+            else getattr(detector, "debounce_k_", 1)
+        )
+        metrics = self._at_threshold(rec, scores, thr, debounce_k=k)
         metrics["threshold"] = thr
         for key, value in (extra_thresholds or {}).items():
             metrics[key] = {
                 "threshold": float(value),
                 **self._at_threshold(rec, scores, float(value), brief=True),
             }
-        table = self._trial_table(rec, scores >= thr)
+        _, events = evaluate_point(
+            rec.truths(),
+            rec.per_trial(scores),
+            thr,
+            k,
+            self.cost,
+            tolerance_s=self.event_tolerance_s,
+        )
+        table = events_table(events, self.cost)
+        table.insert(1, "group", rec.groups)
         low = np.finfo(np.float64).min
         curves: dict[str, Any] = {}
         if len(np.unique(rec.y)) == 2:
@@ -440,6 +553,7 @@ class StreamDetection(Task):
         thr: float,
         *,
         brief: bool = False,
+        debounce_k: int = 1,
     ) -> dict[str, Any]:
         pred = scores >= thr
         samples = {
@@ -485,15 +599,18 @@ class StreamDetection(Task):
             ),
         }
         out["latency_ms"] = _mean_sd(trials["latency_ms"].tolist())
-        minutes = samples["n_neg"] / rec.rate_hz / 60.0
+        summary, _ = evaluate_point(
+            rec.truths(),
+            rec.per_trial(scores),
+            thr,
+            debounce_k,
+            self.cost,
+            tolerance_s=self.event_tolerance_s,
+        )
         out["operating_point"] = {
-            "debounce_k": 1,
-            "slips_detected": out["trials"]["tp"],
-            "n_slips": out["trials"]["n_slip"],
-            "alarms_before_onset": out["trials"]["fp"],
-            "n_trials": out["trials"]["n"],
-            "false_alarms_per_min": events["fp"] / minutes if minutes else math.nan,
-            "median_delay_ms": out["latency_ms"]["median"],
+            "threshold": thr,
+            "debounce_k": int(debounce_k),
+            **summary,
         }
         if rec.reference_s is not None and np.isfinite(rec.reference_s).any():
             ref: dict[str, Any] = {"all": _mean_sd(trials["vs_reference_ms"].tolist())}
@@ -591,47 +708,149 @@ class StreamDetection(Task):
         fixed = det.get_params().get("threshold") is not None
         return {"threshold_from": "fixed (config)" if fixed else "sample ROC"}
 
-    def fit(self, model: Any, dataset: Dataset, *, seed: int, out: Path) -> TaskResult:
+    # -- operating point ------------------------------------------------------------------
+    @property
+    def cost(self) -> Cost:
+        """The cost weights of the trial events (``operating_point.cost``)."""
+        return (self.operating_point or {}).get("cost") or Cost()
+
+    @property
+    def limits(self) -> Limits:
+        """The limits an operating point is chosen within (``operating_point``)."""
+        return (self.operating_point or {}).get("limits") or Limits()
+
+    def _group_column(self, dataset: Dataset) -> str | None:
+        """The trials column of the groups (``group``, else ``object``), if the data has it."""
+        name = self.group or "object"
+        return name if name in dataset.trials.columns else None
+
+    def split_of(self, dataset: Dataset, seed: int) -> tuple[TrialSplit, str]:
+        """The test split (``split``) and what it splits by (``trial`` or the group column)."""
+        col = self._group_column(dataset)
+        by_group = self.split == "group" or (
+            self.split == "auto"
+            and col is not None
+            and dataset.trials[col].astype(str).nunique() >= 2
+        )
+        if by_group:
+            if col is None:
+                raise SlipkitError(
+                    f"task.split=group: dataset {dataset.name!r} has no trial group "
+                    f"{self.group or 'object'!r} (task.group); its trials columns: "
+                    f"{sorted(dataset.trials.columns)}"
+                )
+            split = split_by_group(
+                dataset, col, test_size=self.test_size, val_size=0.0, seed=seed
+            )
+            return split, col
         split = split_by_trial(
             dataset, test_size=self.test_size, val_size=0.0, seed=seed
         )
+        return split, "trial"
+
+    def _cv_groups(self, train: Dataset) -> tuple[NDArray[Any], str]:
+        """The validation folds' groups: the group column when the training side has
+        two groups or more, else the trial ids."""
+        col = self._group_column(train)
+        ids = np.asarray(train.trial_ids, dtype=object)
+        if col is not None:
+            groups = train.trials.set_index("trial_id").loc[ids, col].astype(str)
+            if groups.nunique() >= 2:
+                return groups.to_numpy(dtype=object), col
+        return ids, "trial"
+
+    def _choose(
+        self,
+        detector: Any,
+        truths: Sequence[TrialTruth],
+        scores: Sequence[FloatArray],
+        own: Sequence[float],
+    ) -> OperatingPoint | None:
+        """The operating point on these (validation) trials; None without
+        ``operating_point``. A threshold fixed in the detector's config stays."""
+        cfg = self.operating_point
+        if cfg is None:
+            return None
+        fixed = detector.get_params().get("threshold")
+        thresholds = (
+            np.asarray([float(fixed)])
+            if fixed is not None
+            else threshold_grid(scores, int(cfg["thresholds"]), extra=own)
+        )
+        return choose_operating_point(
+            truths,
+            scores,
+            thresholds=thresholds,
+            debounce_ks=cfg["debounce"],
+            cost=self.cost,
+            limits=self.limits,
+            tolerance_s=self.event_tolerance_s,
+        )
+
+    def fit(self, model: Any, dataset: Dataset, *, seed: int, out: Path) -> TaskResult:
+        split, split_by = self.split_of(dataset, seed)
         train, _, test = split.apply(dataset)
         metrics: dict[str, Any] = {
             "split": {"train": list(split.train), "test": list(split.test)},
+            "split_by": split_by,
             "detectors": {},
         }
         curves: dict[str, Any] = {}
         tables = []
         for i, e in enumerate(self._entries(model)):
-            if i == 0:  # before the fit: event-ROC fits fix the threshold parameter
-                metrics["validation"] = self.validation(e, train)
+            validation, point, source = self.validation(e, train)
+            if i == 0:
+                metrics["validation"] = validation
             rec_tr = self.recordings(train, e["stream"], e["channels"])
             rec_te = self.recordings(test, e["stream"], e["channels"])
-            info = self._fit_one(e["detector"], rec_tr)
+            det = e["detector"]
+            if point is not None and det.get_params().get("threshold") is None:
+                # the point chosen on validation trials; the fit keeps its threshold
+                det.set_params(threshold=point.threshold)
+                det.fit(rec_tr.X, rec_tr.y, segments=rec_tr.segments)
+                info = {"threshold_from": f"lowest cost on {source}"}
+            else:
+                info = self._fit_one(det, rec_tr)
+            det.debounce_k_ = point.debounce_k if point is not None else 1
+            chosen = (
+                {
+                    **point.record(source),
+                    # what is deployed: a detector may move a threshold that sits on
+                    # a training score (FSRTouchSlip) when it fits
+                    "threshold": float(det.threshold_),
+                    "validation_threshold": float(point.threshold),
+                }
+                if point is not None
+                else {
+                    "threshold": float(det.threshold_),
+                    "debounce_k": 1,
+                    "from": info["threshold_from"] + ", debounce 1",
+                }
+            )
             extra = (
                 {"at_paper_threshold": float(e["paper"]["threshold"])}
                 if "threshold" in e["paper"]
-                and float(e["paper"]["threshold"]) != float(e["detector"].threshold_)
+                and float(e["paper"]["threshold"]) != float(det.threshold_)
                 else None
             )
-            m_tr, _, _ = self.score(e["detector"], rec_tr)
-            if i == 0 and metrics["validation"]["k"] == 0:
-                metrics["validation"].update(m_tr)
-            m_te, table, cv = self.score(e["detector"], rec_te, extra_thresholds=extra)
+            m_tr, _, _ = self.score(det, rec_tr)
+            # the test side, scored once at the chosen point
+            m_te, table, cv = self.score(det, rec_te, extra_thresholds=extra)
             block = {
-                "estimator": type(e["detector"]).__name__,
+                "estimator": type(det).__name__,
                 "stream": e["stream"],
                 "unit": e["unit"],
-                "threshold": float(e["detector"].threshold_),
+                "threshold": float(det.threshold_),
                 **info,
-                "params": {k: _plain(v) for k, v in e["detector"].get_params().items()},
+                "operating_point": chosen,
+                "params": {k: _plain(v) for k, v in det.get_params().items()},
                 "train": m_tr,
                 "test": m_te,
                 "paper": e["paper"],
             }
             if i == 0:
                 metrics.update({"name": e["name"], **block})
-                model = e["detector"]
+                model = det
             else:
                 metrics["detectors"][e["name"]] = block
             curves[e["name"]] = cv
@@ -640,25 +859,54 @@ class StreamDetection(Task):
         _plot_roc(curves, out / "roc.png")
         return TaskResult(model, metrics, self.summary(metrics))
 
-    def validation(self, entry: Mapping[str, Any], train: Dataset) -> dict[str, Any]:
-        """Group CV by trial on the training half: clones of the entry's detector
-        fitted (threshold chosen) on k-1 folds, scored on the held-out fold; every
-        numeric metric averaged over the folds (NaN-aware)."""
+    def validation(
+        self, entry: Mapping[str, Any], train: Dataset
+    ) -> tuple[dict[str, Any], OperatingPoint | None, str]:
+        """Group CV on the training side and the operating point chosen on it.
+
+        Clones of the entry's detector are fitted (threshold chosen as configured) on
+        k-1 folds and scored on the held-out fold; every numeric metric is averaged
+        over the folds (NaN-aware), and the operating point (:meth:`_choose`) is chosen
+        on the pooled out-of-fold scores of every training trial
+        (``operating_point`` holds its trial-event summary there). Folds are groups of
+        the group column when the training side has two or more, else trials.
+
+        Returns
+        -------
+        (validation metrics, operating point or None, where it was chosen)
+        """
         from sklearn.model_selection import GroupKFold
 
         ids = np.asarray(train.trial_ids, dtype=object)
-        k = min(int(self.cv), len(ids))
+        groups, by = self._cv_groups(train)
+        k = min(int(self.cv), len(set(groups)))
         if k < 2:
-            # No CV with one training trial: the caller scores the training trial
-            # itself (its AUCs do not depend on the threshold chosen on it).
+            # No CV with one training trial: the clone is scored on the trial it was
+            # fitted on (AUCs do not depend on the threshold chosen there; the rest
+            # and the operating point are optimistic).
             log.warning("validation: %d training trial(s), no group CV", len(ids))
-            return {
+            det = clone(entry["detector"])
+            rec = self.recordings(train, entry["stream"], entry["channels"])
+            self._fit_one(det, rec)
+            m, _, _ = self.score(det, rec, debounce_k=1)
+            s = np.asarray(det.decision_function(rec.X, segments=rec.segments))
+            point = self._choose(
+                det, rec.truths(), rec.per_trial(s), [float(det.threshold_)]
+            )
+            out = {
                 "cv": f"none: {len(ids)} training trial(s), scored on the training "
                 "side (AUCs ignore the threshold fitted there; the rest is optimistic)",
                 "k": 0,
+                **m,
             }
+            if point is not None:
+                out["operating_point"] = point.summary
+            return out, point, f"the {len(ids)} training trial(s) (no CV: optimistic)"
         folds = []
-        for j, (a, b) in enumerate(GroupKFold(n_splits=k).split(ids, groups=ids)):
+        truths: list[TrialTruth] = []
+        scores: list[FloatArray] = []
+        own: list[float] = []
+        for j, (a, b) in enumerate(GroupKFold(n_splits=k).split(ids, groups=groups)):
             det = clone(entry["detector"])
             rec_a = self.recordings(
                 train.subset(ids[a]), entry["stream"], entry["channels"]
@@ -667,9 +915,17 @@ class StreamDetection(Task):
                 train.subset(ids[b]), entry["stream"], entry["channels"]
             )
             self._fit_one(det, rec_a)
-            folds.append(self.score(det, rec_b)[0])
+            folds.append(self.score(det, rec_b, debounce_k=1)[0])
+            s = np.asarray(det.decision_function(rec_b.X, segments=rec_b.segments))
+            truths += rec_b.truths()
+            scores += rec_b.per_trial(s)
+            own.append(float(det.threshold_))
             log.info("validation fold %d/%d done", j + 1, k)
-        return {"cv": "group-kfold by trial", "k": k, **mean_leaves(folds)}
+        out = {"cv": f"group-kfold by {by}", "k": k, **mean_leaves(folds)}
+        point = self._choose(entry["detector"], truths, scores, own)
+        if point is not None:
+            out["operating_point"] = point.summary
+        return out, point, f"validation: group k-fold by {by}, k={k}"
 
     def evaluate(self, model: Any, dataset: Dataset, *, out: Path) -> dict[str, Any]:
         metrics: dict[str, Any] = {"detectors": {}}
@@ -723,6 +979,11 @@ class StreamDetection(Task):
         return lines
 
 
+def _direction(objective: str) -> str:
+    """``minimize`` for a cost, delay or rate of mistakes, else ``maximize``."""
+    return "minimize" if objective.rsplit(".", 1)[-1] in MINIMISED else "maximize"
+
+
 def _plain(v: Any) -> Any:
     if isinstance(v, (list, tuple)):
         return [_plain(x) for x in v]
@@ -742,20 +1003,40 @@ def _num(v: Any, fmt: str = ".4g") -> str:
 
 
 def operating_point_line(name: str, test: Mapping[str, Any], unit: str = "") -> str:
-    """One line: ``<name> at threshold <t> <unit>, debounce 1: slips detected 36/40
-    (90 %), alarms before onset 3/40 trials, false alarms 0.8 /min, median delay 42 ms``."""
+    """One line: ``<name> at threshold <t> <unit>, debounce 2: slips detected 36/40
+    (90 %), early alarms 3/40 trials (8 %), false alarms 0.8 /min, delay median 42 ms
+    (p90 80 ms), cost 0.21``."""
     op = test["operating_point"]
-    n_slips, n = int(op["n_slips"]), int(op["n_trials"])
-    share = (
-        f" ({_num(100.0 * op['slips_detected'] / n_slips, '.0f')} %)" if n_slips else ""
+    n_slips, n = int(op["n_slips"]), int(op["event_trials"])
+    detected = n_slips - int(op["missed"])
+    share = f" ({_num(100.0 * detected / n_slips, '.0f')} %)" if n_slips else ""
+    rate = _float(op.get("early_alarm_rate"))
+    early = (
+        "early alarms n/a (onsets unknown)"
+        if not math.isfinite(rate)
+        else f"early alarms {_pct0(rate)} of trials"
     )
+    unknown = int(op.get("unknown_onset_trials") or 0)
+    note = f" ({unknown} slips of unknown onset: detection only)" if unknown else ""
     return (
-        f"{name} at threshold {_num(test.get('threshold'))}{' ' + unit if unit else ''}"
-        f", debounce {int(op['debounce_k'])}: slips detected {int(op['slips_detected'])}"
-        f"/{n_slips}{share}, alarms before onset {int(op['alarms_before_onset'])}/{n} "
-        f"trials, false alarms {_num(op['false_alarms_per_min'], '.3g')} /min, median "
-        f"delay {_num(op['median_delay_ms'], '.0f')} ms"
+        f"{name} at threshold {_num(op.get('threshold', test.get('threshold')))}"
+        f"{' ' + unit if unit else ''}, debounce {int(op['debounce_k'])}: slips "
+        f"detected {detected}/{n_slips}{share}{note}, {early}, false alarms "
+        f"{_num(op['false_alarms_per_min'], '.3g')} /min, delay median "
+        f"{_num(op['delay_ms'], '.0f')} ms (p90 {_num(op['delay_p90_ms'], '.0f')} ms), "
+        f"cost {_num(op['cost'], '.3g')} over {n} trials"
     )
+
+
+def _float(v: Any) -> float:
+    try:
+        return math.nan if v is None else float(v)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def _pct0(v: float) -> str:
+    return f"{100 * v:.0f} %"
 
 
 def _summary_block(name: str, b: Mapping[str, Any], group_by: str | None) -> list[str]:
@@ -768,6 +1049,7 @@ def _summary_block(name: str, b: Mapping[str, Any], group_by: str | None) -> lis
     lines = [
         f"{name} ({b['estimator']} on {b['stream']}): threshold {_num(te['threshold'])} "
         f"{unit} from {b['threshold_from']}{beside('threshold', _num)}",
+        *_point_lines(b.get("operating_point")),
         f"  test samples: AUC {_num(s['auc'], '.4f')}, TPR {_pct(s['tpr'])}, "
         f"TNR {_pct(s['tnr'])}, FPR {_pct(s['fpr'])}, FNR {_pct(s['fnr'])}",
         f"  test events: AUC {_num(ev['auc'], '.4f')}{beside('auc', _num)}, "
@@ -807,6 +1089,24 @@ def _summary_block(name: str, b: Mapping[str, Any], group_by: str | None) -> lis
                 f"  vs reference onset, {label}: {_num(st['mean'], '+.1f')} +- "
                 f"{_num(st['sd'], '.1f')} ms over {st['n']}{ptxt}"
             )
+    return lines
+
+
+def _point_lines(op: Mapping[str, Any] | None) -> list[str]:
+    """Where the operating point came from and what it cost there (one or two lines)."""
+    if not op:
+        return []
+    lines = [
+        f"  operating point: threshold {_num(op.get('threshold'))}, debounce "
+        f"{op.get('debounce_k')}, from {op.get('from')}"
+        + (
+            f" (validation cost {_num(op['validation'].get('cost'), '.3g')})"
+            if op.get("validation")
+            else ""
+        )
+    ]
+    if op.get("within_limits") is False:
+        lines.append(f"  NOT within the limits: {op.get('note')}")
     return lines
 
 

@@ -5,21 +5,43 @@ Frames are labelled 'slip' for the first ``n_slip`` velocity frames after the on
 SVM's C and gamma can be tuned by Bayesian optimisation on the training half, and the
 online rule (``debounce_k`` consecutive slip frames) gives each test run a detection
 delay in frames and ms.
+
+With ``operating_point`` the debounce ``k`` is the deployed operating point, chosen on
+validation trials: out-of-fold decisions of the training frames (group k-fold by the
+dataset's ``object`` when the training half holds two objects or more, else by
+trial) are turned into trial events (:mod:`slipkit.evaluate.events`: an alarm at the
+``k``-th consecutive slip frame, early alarms, delay from the onset) for each
+candidate ``k``, and the ``k`` of lowest mean cost within the limits is kept (the
+fitted model carries it as ``debounce_k_``). The test half is scored once, at it.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
+from numpy.typing import NDArray
+from sklearn.base import clone
+from sklearn.model_selection import GroupKFold, cross_val_predict
 
 from slipkit.data.dataset import Dataset
 from slipkit.data.splits import split_by_trial
 from slipkit.errors import SlipkitError
+from slipkit.evaluate.events import (
+    Cost,
+    OperatingPoint,
+    TrialTruth,
+    choose_operating_point,
+    evaluate_point,
+    events_table,
+    parse_operating_point,
+    slipped_of,
+)
 from slipkit.evaluate.metrics import classification_metrics, delay_summary
 from slipkit.features.pins import SLIP, STATIC, VARIANTS, Variant
 from slipkit.features.tactip import DatasetFeatures, dataset_features
@@ -48,7 +70,12 @@ class TacTipFrames(Task):
     test_size : float
         Fraction of trials held out (paper: half).
     debounce_k : int
-        Consecutive slip frames before slip is declared online (paper: 2).
+        Consecutive slip frames before slip is declared online (paper: 2); with
+        ``operating_point`` the fallback when no validation is possible.
+    operating_point : mapping or None
+        Choose ``k`` on validation trials among ``debounce`` by the ``cost`` within
+        the limits (:func:`slipkit.evaluate.events.parse_operating_point`; the frame
+        classifier's own decision is the threshold). None: ``debounce_k``.
     search : mapping or None
         In-run Bayesian optimisation: ``{n_trials, cv, scoring, space: {C: [lo, hi,
         "log"], gamma: [...]}}``; None or ``n_trials: 0`` keeps the model's parameters.
@@ -72,6 +99,7 @@ class TacTipFrames(Task):
         n_slip: int | None = 4,
         test_size: float = 0.5,
         debounce_k: int = 2,
+        operating_point: Mapping[str, Any] | None = None,
         search: Mapping[str, Any] | None = None,
         cv: int = 3,
         scoring: str = "balanced_accuracy",
@@ -86,6 +114,7 @@ class TacTipFrames(Task):
         self.n_slip = n_slip
         self.test_size = test_size
         self.debounce_k = debounce_k
+        self.operating_point = parse_operating_point(operating_point)
         self.search = search
         self.cv = cv
         self.scoring = scoring
@@ -187,11 +216,44 @@ class TacTipFrames(Task):
         info["params"] = _svm_params(model)
         return model, info
 
+    def truths(
+        self, dataset: Dataset, feats: DatasetFeatures
+    ) -> tuple[list[TrialTruth], list[NDArray[np.intp]]]:
+        """Each trial's truth on its velocity frames (times ``feats.t``) and its rows."""
+        onsets = {
+            tr.trial_id: (
+                float(tr.labels.get(self.label, np.nan)),
+                slipped_of(tr.labels, float(tr.labels.get(self.label, np.nan))),
+            )
+            for tr in dataset
+        }
+        truths, rows = [], []
+        for tid in dict.fromkeys(feats.groups):
+            idx = np.flatnonzero(feats.groups == tid)
+            onset, slipped = onsets[str(tid)]
+            truths.append(TrialTruth(str(tid), feats.t[idx], slipped, onset))
+            rows.append(idx)
+        return truths, rows
+
+    def debounce_of(self, model: Any) -> int:
+        """The deployed debounce: the model's chosen ``debounce_k_``, else the task's."""
+        return int(getattr(model, "debounce_k_", self.debounce_k))
+
     def score(
-        self, model: Any, dataset: Dataset, feats: DatasetFeatures
+        self,
+        model: Any,
+        dataset: Dataset,
+        feats: DatasetFeatures,
+        *,
+        debounce_k: int | None = None,
     ) -> tuple[dict[str, Any], pd.DataFrame]:
-        """Frame metrics, per-trial online detection and a per-frame predictions table."""
+        """Frame metrics, per-trial online detection and a per-frame predictions table.
+
+        ``debounce_k`` (None: :meth:`debounce_of` the model) sets the online rule and
+        the trial events (``operating_point``).
+        """
         _check_pin_count(model, feats, self.variant)
+        k = self.debounce_of(model) if debounce_k is None else int(debounce_k)
         pred = np.asarray(model.predict(feats.X))
         metrics = classification_metrics(feats.y, pred, LABELS)
         rate = self.rate_hz(dataset)
@@ -201,20 +263,74 @@ class TacTipFrames(Task):
             rows = feats.groups == tid
             onset = np.flatnonzero(feats.y[rows] == SLIP)
             if len(onset) == 0:
-                fired = first_detection(pred[rows], self.debounce_k)
+                fired = first_detection(pred[rows], k)
                 false_alarms += fired is not None
                 continue
-            d = detection_delay(pred[rows], int(onset[0]), self.debounce_k)
+            d = detection_delay(pred[rows], int(onset[0]), k)
             delays.append(np.nan if d is None else float(d))
         metrics["detection"] = {
-            "debounce_k": self.debounce_k,
+            "debounce_k": k,
             **delay_summary(delays, rate),
             "false_alarm_trials_without_slip": false_alarms,
         }
+        truths, rows_of = self.truths(dataset, feats)
+        summary, _ = evaluate_point(
+            truths,
+            [(pred[r] == SLIP).astype(np.float64) for r in rows_of],
+            0.5,
+            k,
+            self.cost,
+        )
+        metrics["operating_point"] = {"threshold": math.nan, "debounce_k": k, **summary}
         table = pd.DataFrame(
             {"trial_id": feats.groups, "t": feats.t, "label": feats.y, "pred": pred}
         )
         return metrics, table
+
+    @property
+    def cost(self) -> Cost:
+        """The trial events' cost weights (``operating_point.cost``)."""
+        return (self.operating_point or {}).get("cost") or Cost()
+
+    def choose_debounce(
+        self, model: Any, train: Dataset, feats: DatasetFeatures
+    ) -> tuple[OperatingPoint, str] | None:
+        """The debounce ``k`` of lowest validation cost (None without ``operating_point``
+        or with fewer than two training groups).
+
+        Out-of-fold decisions of clones of the fitted ``model`` (its selected
+        parameters) by group k-fold on the training frames: groups are the training
+        trials' ``object`` when there are two or more, else the trials.
+        """
+        cfg = self.operating_point
+        if cfg is None:
+            return None
+        groups: NDArray[Any] = feats.groups
+        by = "trial"
+        if "object" in train.trials.columns:
+            obj = train.trials.set_index("trial_id")["object"].astype(str)
+            by_obj = obj.loc[feats.groups.astype(str)].to_numpy()
+            if len(set(by_obj)) >= 2:
+                groups, by = by_obj, "object"
+        k = min(int(self.cv), len(set(groups)))
+        if k < 2:
+            log.warning(
+                "operating point: one training group, debounce %d kept", self.debounce_k
+            )
+            return None
+        pred = cross_val_predict(
+            clone(model), feats.X, feats.y, groups=groups, cv=GroupKFold(n_splits=k)
+        )
+        truths, rows = self.truths(train, feats)
+        point = choose_operating_point(
+            truths,
+            [(np.asarray(pred)[r] == SLIP).astype(np.float64) for r in rows],
+            thresholds=[0.5],
+            debounce_ks=cfg["debounce"],
+            cost=self.cost,
+            limits=cfg["limits"],
+        )
+        return point, f"validation: group k-fold by {by}, k={k}"
 
     def fit(self, model: Any, dataset: Dataset, *, seed: int, out: Path) -> TaskResult:
         split = split_by_trial(
@@ -230,9 +346,33 @@ class TacTipFrames(Task):
             len(test),
         )
         model, info = self.fit_model(model, f_train, seed=seed)
+        chosen = self.choose_debounce(model, train, f_train)
+        if chosen is not None:
+            point, source = chosen
+            model.debounce_k_ = point.debounce_k
+            info["operating_point"] = {
+                **point.record(source),
+                "threshold": None,  # the classifier's own decision (predict)
+            }
+        else:
+            info["operating_point"] = {
+                "threshold": None,
+                "debounce_k": self.debounce_k,
+                "from": "fixed (task.debounce_k)",
+            }
         m_train, _ = self.score(model, train, f_train)
         m_test, table = self.score(model, test, f_test)
         table.to_csv(out / "test_predictions.csv", index=False)
+        truths, rows = self.truths(test, f_test)
+        pred = table["pred"].to_numpy()
+        _, events = evaluate_point(
+            truths,
+            [(pred[r] == SLIP).astype(np.float64) for r in rows],
+            0.5,
+            self.debounce_of(model),
+            self.cost,
+        )
+        events_table(events, self.cost).to_csv(out / "test_events.csv", index=False)
         metrics = {
             "variant": self.variant,
             "n_slip": self.n_slip,
@@ -311,6 +451,9 @@ def _summary(metrics: Mapping[str, Any]) -> list[str]:
         f"  online ({det['debounce_k']} frames): {det['detected']}/{det['n_trials']} slips "
         f"detected, median delay {det['median_frames']} frames = {det['median_ms']:.1f} ms",
     ]
+    op = metrics.get("operating_point")
+    if op:
+        lines.append(f"  debounce {op['debounce_k']} from {op['from']}")
     if "selection" in metrics:
         lines.insert(1, "  " + format_best(metrics["selection"]))
     return lines
