@@ -202,7 +202,7 @@ def test_over_budget_row_under_load_is_told_apart() -> None:
         df.set_index("estimator").loc["a", ["p99_quiet_us", "p99_us"]]
     )
     assert (
-        "- `a`: p99 900 us > 50 us budget (its quietest block's p99 30.0 us meets the "
+        "- `a`: p99 900 us > 50 us budget: over (its quietest block's p99 30.0 us meets the "
         "budget: the machine's load put it over; re-measure on an idle machine)"
     ) in lines
 

@@ -70,6 +70,10 @@ def test_demo_smoke_two_families(
     out = capsys.readouterr().out.strip().splitlines()
     assert str(report) == out[-1]
     assert out[-2].startswith("stage times (s): simulate ")
+    # the replay stage judges each deployed bundle by the latency rule and says its word
+    replayed = [line for line in out if line.startswith("replay tactip: p99 ")]
+    assert 1 == len(replayed)
+    assert replayed[0].rsplit(": ", 1)[-1] in {"within", "borderline", "over"}
 
 
 def _fake_results() -> tuple[dict, dict, dict]:

@@ -43,7 +43,7 @@ def test_choice_skips_over_budget_and_unexportable() -> None:
     assert ("fast", True) == (choice.row["estimator"], choice.recommended)
     assert (
         ("nobundle", "not exportable: no deployer"),
-        ("slow", "p99 3572 us > 100 us budget"),
+        ("slow", "p99 3572 us > 100 us budget: over"),
     ) == choice.passed_over
 
 
@@ -51,7 +51,7 @@ def test_verdict_names_reasons_for_passing_over() -> None:
     """The verdict recommends the within-budget row and says why each better one lost."""
     text = "\n".join(verdict(_table(), "balanced_accuracy"))
     assert "**Deploy `fast`" in text
-    assert "- `slow`: p99 3572 us > 100 us budget" in text
+    assert "- `slow`: p99 3572 us > 100 us budget: over" in text
     assert "- `nobundle`: not exportable: no deployer" in text
     assert "p99 40.0 us = 0.40 x the 100 us budget" in text
 
@@ -84,13 +84,18 @@ def test_far_over_budget_is_not_borderline() -> None:
     assert "borderline" not in verdict(df, "balanced_accuracy")[0]
 
 
-def test_slightly_over_budget_is_borderline_and_not_recommended() -> None:
-    """A p99 of 60.6 us against 50 us is not recommended and is flagged borderline."""
+def test_slightly_over_budget_is_borderline_and_recommended_flagged() -> None:
+    """A p99 of 60.6 us against 50 us (1.21 x, inside the latency rule's margin) is
+    recommended, flagged borderline; 63 us (1.26 x) is over and passed over."""
     df = build_table([_row("fsr", 0.9, 60.6, budget=50.0)], "balanced_accuracy")
     choice = choose_deploy(df)
     first = verdict(df, "balanced_accuracy")[0]
-    assert (False, True) == (choice.recommended, choice.borderline)
+    assert (True, True) == (choice.recommended, choice.borderline)
     assert "p99 60.6 us = 1.21 x the 50 us budget (borderline" in first
+    over = choose_deploy(
+        build_table([_row("fsr", 0.9, 63.0, budget=50.0)], "balanced_accuracy")
+    )
+    assert (False, False) == (over.recommended, over.borderline)
 
 
 def test_pareto_plot_uses_p99() -> None:

@@ -327,15 +327,18 @@ def test_a_bad_bundle_in_a_hand_names_its_stream(
     assert err.startswith("slipkit-run: error: --stream: ring: ")
 
 
-def test_pace_without_streams_is_refused(
+def test_pace_on_a_live_input_is_refused(
     pair: tuple[LinearCase, LinearCase], capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """--pace with a single bundle is a one-line error naming --pace."""
+    """--pace with a single bundle on --udp is a one-line error naming --pace."""
     a, _ = pair
     with pytest.raises(SystemExit) as info:
-        main([str(a.path), "--pace"])
+        main([str(a.path), "--udp", "127.0.0.1:0", "--pace"])
     assert 2 == info.value.code
-    assert "--pace: applies to --stream runs only" in capsys.readouterr().err
+    assert (
+        "slipkit-run: error: --pace: paces replayed frames; --udp frames come at the "
+        "sender's pace\n"
+    ) == capsys.readouterr().err
 
 
 def _paced_run(

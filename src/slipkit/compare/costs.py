@@ -5,9 +5,11 @@ exported to a bundle (:func:`slipkit.export.commands.export_main`, into a tempor
 folder unless kept), the bundle is loaded by the runtime with a one-thread session
 (:class:`slipkit.runtime.SessionSpec`, ``intra_op_num_threads=1``, warm-up calls
 first), and its own replay frames (held-out test trials) go through
-:class:`slipkit.runtime.StreamLoop` one frame at a time (batch 1). The latency of
-every decision (frame arrival -> decision, the preprocessing, the ONNX call and the
-debounce) gives p50 / p99 in microseconds against the sensor's budget (the bundle's
+:class:`slipkit.runtime.StreamLoop` one frame at a time (batch 1), paced at the
+sensor's rate and judged by the latency rule (:mod:`slipkit.runtime.budget`, the same
+as ``slipkit-run --check``'s): the latency of every decision and prepare frame (frame
+arrival -> decision: the preprocessing, the ONNX call and the debounce) gives p50 and
+the judged p99 in microseconds against the sensor's budget (the bundle's
 ``budget_ms``: ``configs/deploy``).
 
 An estimator without an exporter, or a task without a deployer, is not an error
@@ -29,6 +31,14 @@ from typing import Any
 
 import numpy as np
 from omegaconf import OmegaConf
+
+from slipkit.runtime.budget import (
+    LatencyJudgement,
+    block_p99,
+    frame_latency_us,
+    judge_p99,
+    paced_frames,
+)
 
 
 @dataclass
@@ -90,15 +100,19 @@ class DeployCost:
     note : str
         ``"ok"`` or why the estimator could not be exported / timed.
     latency_us : ndarray
-        Frame arrival to decision of every timed decision, us.
+        Frame arrival to the end of its work of every timed decision and prepare
+        frame, us (:func:`slipkit.runtime.budget.frame_latency_us`).
     p50_us, p99_us : float
-        Percentiles of ``latency_us`` (NaN when not exported).
+        p50 and the judged p99 (:func:`slipkit.runtime.budget.block_p99`) of
+        ``latency_us`` (NaN when not exported).
     budget_p99_us, frame_period_us : float
         The sensor's budget (from the bundle manifest), us.
     bundle : Path or None
         The kept bundle folder (None when it lived in a temporary folder).
     window, hop : int
         Frames per model call and frames between calls in the bundle.
+    paced : bool
+        Whether the frames were paced at the sensor's rate.
     """
 
     exported: bool
@@ -111,13 +125,21 @@ class DeployCost:
     bundle: Path | None = None
     window: int = 0
     hop: int = 0
+    paced: bool = True
+
+    @property
+    def judgement(self) -> LatencyJudgement:
+        """``p99_us`` against the budget by the latency rule."""
+        return judge_p99(
+            self.p99_us, self.budget_p99_us, paced=self.paced, n=len(self.latency_us)
+        )
 
     @property
     def within_budget(self) -> bool | None:
-        """p99 within the budget (None when not measured)."""
+        """The latency rule's ``passed`` (within or borderline; None when not measured)."""
         if not self.exported or not math.isfinite(self.p99_us):
             return None
-        return bool(self.p99_us <= self.budget_p99_us)
+        return self.judgement.passed
 
 
 @contextlib.contextmanager
@@ -168,14 +190,20 @@ def export_run(run: Path, out: Path, *, max_frames: int) -> Path:
     return Path(path)
 
 
-def time_bundle(bundle_dir: Path, *, max_frames: int, warmup: int) -> DeployCost:
-    """p50 / p99 per decision of a bundle's replay frames through :class:`StreamLoop`.
+def time_bundle(
+    bundle_dir: Path, *, max_frames: int, warmup: int, pace: bool = True
+) -> DeployCost:
+    """p50 and the judged p99 per frame of a bundle's replay through :class:`StreamLoop`.
 
     One intra-op thread, batch 1, ``warmup`` session calls before the first frame
-    (``StreamLoop`` runs them), then the frames one by one; the latency is what the
-    loop records per decision (arrival -> decision), in us.
+    (``StreamLoop`` runs them), then the first ``max_frames`` frames one by one, paced
+    at their timestamps as ``slipkit-run --check`` paces them (at most
+    :func:`~slipkit.runtime.budget.paced_frames`; ``pace=False``: back to back, all
+    ``max_frames``); the latency is what the loop records per decision and prepare
+    frame (arrival -> end of its work), in us, and the p99 is the latency rule's.
     """
     from slipkit.runtime import ReplaySource, SessionSpec, StreamLoop, load_bundle
+    from slipkit.runtime.hand import ReplayFeed
     from slipkit.runtime.sources import load_replay
 
     spec = SessionSpec(
@@ -192,20 +220,27 @@ def time_bundle(bundle_dir: Path, *, max_frames: int, warmup: int) -> DeployCost
     frames, times = load_replay(
         bundle.replay_path, tuple(m.frame.shape), m.frame.rate_hz
     )
-    frames, times = frames[:max_frames], times[:max_frames]
-    result = StreamLoop(bundle).run(ReplaySource(frames, times))
-    lat = np.asarray(result.latency_ns, dtype=np.float64) / 1e3
-    p50, p99 = np.percentile(lat, [50, 99]) if len(lat) else (math.nan, math.nan)
+    n = min(len(frames), int(max_frames))
+    if pace:
+        n = paced_frames(n, m.frame.rate_hz)
+    frames, times = frames[:n], times[:n]
+    source = (
+        ReplayFeed(frames, times, pace=True) if pace else ReplaySource(frames, times)
+    )
+    result = StreamLoop(bundle).run(source)
+    lat = frame_latency_us(result)
+    p50 = float(np.percentile(lat, 50)) if len(lat) else math.nan
     return DeployCost(
         exported=True,
         note="ok",
         latency_us=lat,
-        p50_us=float(p50),
-        p99_us=float(p99),
+        p50_us=p50,
+        p99_us=block_p99(lat),
         budget_p99_us=float(m.budget.p99_ms) * 1e3,
         frame_period_us=float(m.budget.frame_period_ms) * 1e3,
         window=int(m.frame.window),
         hop=int(m.frame.hop),
+        paced=bool(pace),
     )
 
 

@@ -20,6 +20,7 @@ from slipkit.compare.table import (
     score_of,
 )
 from slipkit.evaluate.events import Cost
+from slipkit.runtime.budget import RULE_TEXT
 
 #: (column, header, format) of the report's main table
 MAIN = (
@@ -390,14 +391,12 @@ def _over_seeds(row: pd.Series) -> str:
     )
 
 
-#: how the verdict treats timing noise, stated under every verdict
+#: how the verdict treats latency, stated under every verdict: the runtime's one rule,
+#: and what the quietest block tells of a row put over the budget
 TIMING_RULE = (
-    "Budget rule: the p99 checked is the median of the p99s of 5 contiguous blocks of the "
-    "timed decisions (all seeds' decisions pooled), so one stall of a shared machine does "
-    "not decide; a row is within budget when that p99 <= the budget, and a margin between "
-    f"{BORDERLINE:.2f} and {1 / BORDERLINE:.2f} x the budget is flagged borderline (a "
-    "re-measure on another machine may land on the other side), and a row over budget "
-    "whose quietest block meets it is marked as put over by the machine's load."
+    RULE_TEXT
+    + " A row over budget whose quietest block meets the budget is marked as put over "
+    "by the machine's load."
 )
 
 

@@ -14,6 +14,14 @@ from numpy.typing import ArrayLike
 from slipkit.compare.adapters import ROW_COLUMNS
 from slipkit.errors import SlipkitError
 from slipkit.evaluate.events import Cost, no_better_than_nothing, parse_cost
+from slipkit.runtime.budget import (
+    BORDERLINE,
+    P99_BLOCKS,
+    block_p99,
+    judge_latency,
+    judge_p99,
+    quiet_p99,
+)
 
 #: columns of ``metrics.csv`` before the per-axis regression columns
 COLUMNS = (
@@ -164,14 +172,10 @@ def build_table(rows: Sequence[dict[str, object]], primary: str) -> pd.DataFrame
     return df
 
 
-#: a p99 above this fraction of the budget is reported as borderline: on a shared machine a
-#: re-measure can land on the other side of the budget
-BORDERLINE = 0.8
-
-
 def is_borderline(margin: float) -> bool:
-    """True when p99 / budget ``margin`` lies between :data:`BORDERLINE` and its inverse."""
-    return bool(math.isfinite(margin) and BORDERLINE < margin < 1 / BORDERLINE)
+    """True when the latency rule calls p99 / budget ``margin`` borderline
+    (:data:`~slipkit.runtime.budget.BORDERLINE` < margin <= its inverse)."""
+    return judge_p99(margin, 1.0).status == "borderline"
 
 
 @dataclass(frozen=True)
@@ -184,7 +188,8 @@ class DeployChoice:
         The recommended row; when none meets the budget, the best-scoring exportable row
         (else the best-scoring row), shown but not recommended. None without any score.
     recommended : bool
-        True when ``row`` is exported and its p99 (us) meets its p99 budget (us).
+        True when ``row`` is exported and the latency rule passes its p99 (us) against
+        its p99 budget (us): within, or borderline (flagged).
     passed_over : tuple of (str, str)
         ``(estimator, reason)`` for each row that scores at least as high as ``row`` (ranked
         before it) and was not chosen; with ``recommended`` False, every row's reason in
@@ -210,7 +215,7 @@ class DeployChoice:
 
     @property
     def borderline(self) -> bool:
-        """True when p99 / budget is in (:data:`BORDERLINE`, 1 / :data:`BORDERLINE`): noisy."""
+        """True when the latency rule calls ``row``'s p99 borderline (passes, flagged)."""
         return is_borderline(self.margin)
 
 
@@ -335,7 +340,8 @@ def verdict_cost(
 
 
 def _deploy_rejection(r: pd.Series) -> str | None:
-    """Not exported, or p99 over budget (None: deployable within budget)."""
+    """Not exported, or p99 over budget by the latency rule (None: deployable; a
+    borderline p99 passes, flagged by :attr:`DeployChoice.borderline`)."""
     note = r.get("export")
     if note != "ok":
         text = (
@@ -353,8 +359,9 @@ def _deploy_rejection(r: pd.Series) -> str | None:
         ok = r.get("within_budget")
         measured = isinstance(ok, bool | np.bool_) and bool(ok)
         return None if measured else "p99 not measured against a budget"
-    if p99 > budget:
-        return f"p99 {p99:.0f} us > {budget:.4g} us budget"
+    judged = judge_p99(p99, budget)
+    if not judged.passed:
+        return f"p99 {p99:.0f} us > {budget:.4g} us budget: {judged.status}"
     return None
 
 
@@ -511,59 +518,6 @@ def _margin(r: pd.Series) -> float:
     return p99 / budget if math.isfinite(budget) and budget > 0 else math.nan
 
 
-#: contiguous blocks the timed decisions are cut into; the p99 checked against the budget
-#: is the median of the blocks' p99s, so one stall of a shared machine (a burst inside one
-#: block) does not move it
-P99_BLOCKS = 5
-
-
-def block_p99(latency_us: ArrayLike, blocks: int = P99_BLOCKS) -> float:
-    """The p99 the budget is checked on: the median over ``blocks`` contiguous blocks of their p99.
-
-    A plain p99 over a few thousand decisions is set by a handful of frames; on a shared
-    machine one scheduler stall moves it by tens of microseconds, enough to flip a
-    verdict near the budget (issue 15: 60.6 us against 50 us in one of two identical
-    runs). The median of per-block p99s ignores a stall confined to fewer than half of
-    the blocks. With fewer than ``2 * blocks`` decisions the plain p99 is returned.
-
-    Parameters
-    ----------
-    latency_us : array_like of float
-        Per-decision latency in arrival order, us (NaNs are dropped).
-    blocks : int
-        Number of contiguous blocks (>= 1).
-
-    Returns
-    -------
-    float
-        The median block p99, us (NaN without any finite latency).
-    """
-    lat = np.asarray(latency_us, dtype=np.float64)
-    lat = lat[np.isfinite(lat)]
-    if len(lat) == 0:
-        return math.nan
-    if blocks <= 1 or len(lat) < 2 * blocks:
-        return float(np.percentile(lat, 99))
-    return float(np.median([np.percentile(b, 99) for b in np.array_split(lat, blocks)]))
-
-
-def quiet_p99(latency_us: ArrayLike, blocks: int = P99_BLOCKS) -> float:
-    """The lowest of the ``blocks`` contiguous blocks' p99s, us: the run's quietest stretch.
-
-    Not what the budget is checked on (:func:`block_p99` is): it tells an over-budget p99
-    that a loaded machine made (the quietest block meets the budget) from one the
-    estimator makes itself (every block is over). NaN without any finite latency; with
-    fewer than ``2 * blocks`` decisions the plain p99.
-    """
-    lat = np.asarray(latency_us, dtype=np.float64)
-    lat = lat[np.isfinite(lat)]
-    if len(lat) == 0:
-        return math.nan
-    if blocks <= 1 or len(lat) < 2 * blocks:
-        return float(np.percentile(lat, 99))
-    return float(min(np.percentile(b, 99) for b in np.array_split(lat, blocks)))
-
-
 #: columns of a per-seed row that are not averaged over seeds (text, flags, the seed)
 _NOT_AVERAGED = frozenset(
     {"estimator", "kind", "class", "export", "within_budget", "pareto", "seed", "score"}
@@ -581,8 +535,8 @@ def seed_table(
     Every numeric column is averaged over the seeds (:func:`slipkit.compare.aggregate.aggregate`)
     and its sample standard deviation kept as ``<column>_std`` (the CI half-width as
     ``<column>_ci``); ``n_seeds`` counts the seeds. ``p50_us`` / ``p99_us`` are taken on
-    all seeds' decisions pooled (``latencies``: estimator -> latencies in us, in order),
-    the p99 as :func:`block_p99`; the budget verdict is on that p99. ``export`` is ``ok``
+    all seeds' frames pooled (``latencies``: estimator -> latencies in us, in order),
+    judged by the latency rule (:func:`slipkit.runtime.budget.judge_latency`). ``export`` is ``ok``
     only when every seed's bundle exported (else the first seed's reason). The score is
     that of the mean ``primary`` (:func:`build_table`).
 
@@ -634,14 +588,12 @@ def seed_table(
                     row[c] = " | ".join(seen)
         lat = np.asarray(latencies.get(str(est), np.zeros(0)), dtype=np.float64)
         if not bad and len(lat):
-            p99 = block_p99(lat)
             budget = float(first.get("budget_p99_us", math.nan))
+            judged = judge_latency(lat, budget)
             row["p50_us"] = float(np.percentile(lat, 50))
-            row["p99_us"] = p99
+            row["p99_us"] = block_p99(lat)
             row["p99_quiet_us"] = quiet_p99(lat)
-            row["within_budget"] = (
-                bool(p99 <= budget) if math.isfinite(budget) else None
-            )
+            row["within_budget"] = judged.passed if math.isfinite(budget) else None
         else:
             row["p50_us"] = row["p99_us"] = row["p99_quiet_us"] = math.nan
             row["within_budget"] = None

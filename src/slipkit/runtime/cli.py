@@ -4,6 +4,7 @@ Usage::
 
     slipkit-run exports/tactip_svm                       # the bundle's replay.npz
     slipkit-run exports/tactip_svm --replay frames.npz --check --json out.json
+    slipkit-run exports/tactip_svm --check --no-pace    # frames back to back (understates)
     slipkit-run exports/tactip_svm --udp 127.0.0.1:9000 --frames 1000
     slipkit-run exports/tactip_svm --udp 127.0.0.1:9000 --wait 0 --timeout 5
     slipkit-run exports/tactip_svm --choose-session      # measure session options
@@ -19,8 +20,13 @@ Usage::
 With ``--stream`` (repeated) one process serves a whole hand: each bundle on its own
 input, reported per stream (:mod:`slipkit.runtime.hand`).
 
-Exit status: 0 success; 1 ``--check`` failed (p99 over the manifest's budget, or no
-decision was made; with ``--stream``, on any stream), ``--udp`` / ``--lsl`` and no
+``--check`` judges latency by the latency rule (:mod:`slipkit.runtime.budget`, the same
+as ``slipkit compare``'s): replays paced at the sensor's rate by default (``--no-pace``:
+back to back, said in the verdict), the median of 5 block p99s of the decision and
+prepare frames, ``within`` / ``borderline`` (passes) / ``over`` (fails).
+
+Exit status: 0 success; 1 ``--check`` failed (p99 over the rule's margin of the
+manifest's budget, or no decision was made; with ``--stream``, on any stream), ``--udp`` / ``--lsl`` and no
 frame arrived within ``--wait``, or a stream of a hand failed; 2 a bad bundle, replay file or argument: one line on stderr,
 ``slipkit-run: error: ...``, naming the file and field or the option. Every deliberate
 error is a :class:`~slipkit.errors.SlipkitError`; any other exception is a bug and
@@ -38,6 +44,13 @@ from typing import Any
 
 from slipkit._files import check_out_file, read_json_object, write_out_file
 from slipkit.errors import SlipkitError
+from slipkit.runtime.budget import (
+    PACED_MIN_FRAMES,
+    PACED_S,
+    STATISTIC,
+    UNPACED_NOTE,
+    paced_frames,
+)
 from slipkit.runtime.bundle import (
     DEFAULT_DEADLINE_S,
     MAX_DEADLINE_S,
@@ -49,6 +62,7 @@ from slipkit.runtime.errors import FrameError, OptionError
 from slipkit.runtime.hand import (
     MAX_SPIN_US,
     MODES,
+    ReplayFeed,
     check_spin_us,
     parse_stream,
     run_hand_cli,
@@ -160,9 +174,13 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--pace",
-        action="store_true",
-        help="--stream: hand replay frames over at their own timestamps' rate (wall "
-        "clock), as the sensor would, instead of as fast as the loop takes them",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="hand replayed frames over at their own timestamps' rate (wall clock), as "
+        "the sensor would, instead of as fast as the loop takes them (a paced BUNDLE "
+        f"replay plays at most max({PACED_MIN_FRAMES} frames, {PACED_S:g} s) unless "
+        "--frames says; docs/deploy.md); default: a BUNDLE replay is paced with "
+        "--check, else not; --stream replays are not",
     )
     src = p.add_mutually_exclusive_group()
     src.add_argument(
@@ -249,7 +267,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--check",
         action="store_true",
-        help="exit 1 when p99 latency exceeds the manifest's budget_ms.p99",
+        help="exit 1 when the latency rule judges the p99 over the manifest's "
+        "budget_ms.p99 (within and borderline pass); paces a replay unless --no-pace",
     )
     p.add_argument(
         "--json",
@@ -333,7 +352,7 @@ def _parser() -> argparse.ArgumentParser:
         type=float,
         default=0.0,
         metavar="N",
-        help="--stream with --pace: sleep until N us before each replay frame is due, "
+        help="paced replays: sleep until N us before each replay frame is due, "
         f"then spin the rest (0 to {MAX_SPIN_US:g}; default 0: sleep the whole wait)",
     )
     return p
@@ -382,9 +401,15 @@ def _summary_lines(summary: dict[str, Any], source: str) -> list[str]:
             f"decision; {prep['late']} late) arrival->done (ms): p50 {_fmt(pl['p50'])}  "
             f"p99 {_fmt(pl['p99'])}  max {_fmt(pl['max'])}; {prep['over_budget']} over budget"
         )
-    verdict = {True: "met", False: "MISSED", None: "not measured (no decisions)"}[
-        s["within_budget"]
-    ]
+    check = s.get("latency_check") or {}
+    if s["within_budget"] is None or check.get("p99_ms") is None:
+        verdict = "not measured (no decisions)"
+    else:
+        verdict = (
+            f"p99 {_fmt(check['p99_ms'])} ms ({STATISTIC}"
+            + (", decision and prepare frames" if prep is not None else "")
+            + f") = {check['margin']:.2f} x: {check['status']}"
+        )
     lines.append(
         f"budget: p99 <= {budget['p99']:g} ms (frame period {budget['frame_period']:g} ms): "
         f"{verdict}; {s['over_budget']} decisions over budget, {s['over_period']} over the frame period"
@@ -441,8 +466,23 @@ def _check_args(args: argparse.Namespace) -> None:
                 )
     elif args.bundle is None:
         raise OptionError("BUNDLE", "give a bundle folder, or one --stream per bundle")
-    elif args.pace:
-        raise OptionError("--pace", "applies to --stream runs only")
+    elif args.pace is not None and (args.udp or args.lsl or args.choose_session):
+        live = "--udp" if args.udp else "--lsl" if args.lsl else None
+        raise OptionError(
+            "--pace" if args.pace else "--no-pace",
+            f"paces replayed frames; {live} frames come at the sender's pace"
+            if live
+            else "--choose-session measures the options back to back",
+        )
+    # A BUNDLE replay is paced with --check unless --no-pace (the latency rule,
+    # slipkit.runtime.budget); --stream replays only with --pace.
+    unpaceable = args.udp is not None or args.lsl is not None or args.choose_session
+    args.paced = (
+        bool(args.pace)
+        if args.stream or args.pace is not None
+        else bool(args.check and not unpaceable)
+    )
+    args.pace = bool(args.pace) if args.stream else args.paced
     if args.frames is not None and args.frames < 1:
         raise OptionError("--frames", f"must be >= 1; got {args.frames}")
     if not 0 < args.timeout <= MAX_TIMEOUT_S:  # False for NaN too
@@ -455,9 +495,10 @@ def _check_args(args: argparse.Namespace) -> None:
             f"must be in [0, {MAX_TIMEOUT_S:g}] s (0: forever); got {args.wait}",
         )
     check_spin_us(args.spin_us)
-    if args.spin_us and not args.pace:
+    if args.spin_us and not args.paced:
         raise OptionError(
-            "--spin-us", "spins before paced replay frames: give --stream ... --pace"
+            "--spin-us",
+            "spins before paced replay frames: give --pace (or --check on a replay)",
         )
     if args.busy_poll and args.stream and args.hand_mode == "threads":
         raise OptionError(
@@ -573,9 +614,26 @@ def _run_source(
         }
     else:
         frames, times, name = _replay(bundle, args.replay)
+        n = len(frames)
         if args.frames is not None:
-            frames, times = frames[: args.frames], times[: args.frames]
-        result = loop.run(ReplaySource(frames, times))
+            n = min(n, args.frames)
+        elif args.paced:
+            n = paced_frames(n, bundle.manifest.frame.rate_hz)
+        frames, times = frames[:n], times[:n]
+        if args.paced:
+            # the runtime's own pacing (the hand's replay feed): each frame handed over
+            # at its timestamp, as the sensor would
+            result = loop.run(
+                ReplayFeed(
+                    frames,
+                    times,
+                    pace=True,
+                    busy_poll=args.busy_poll,
+                    spin_ns=int(args.spin_us * 1000),
+                )
+            )
+        else:
+            result = loop.run(ReplaySource(frames, times))
         udp = None
         own = bundle.replay_path is not None and (
             args.replay is None or _same_file(args.replay, bundle.replay_path)
@@ -665,8 +723,10 @@ def run(argv: Sequence[str] | None = None) -> int:
         finally:
             if udp_sink is not None:
                 udp_sink.close()
-        out = result.summary()
+        replayed = args.udp is None and args.lsl is None
+        out = result.summary(paced=args.paced if replayed else None)
         out["source"] = name
+        out["paced"] = args.paced if replayed else None
         if udp_sink is not None:
             out["send"] = {
                 "to": args.send,
@@ -686,6 +746,13 @@ def run(argv: Sequence[str] | None = None) -> int:
             print(line)
         if udp is None and replay_line is not None:
             print(replay_line)
+        if replayed:
+            print(
+                f"paced: {out['frames']} frames at their timestamps ("
+                f"{bundle.manifest.frame.rate_hz:g} Hz)"
+                if args.paced
+                else UNPACED_NOTE
+            )
         if lsl_hook is not None:
             out["lsl_out"] = {"name": args.lsl_out, "pushed": lsl_hook.n_pushed}
             print(
@@ -725,7 +792,12 @@ def run(argv: Sequence[str] | None = None) -> int:
             print(f"lsl: no frame arrived within --wait {args.wait:g} s")
             status = 1
         if args.check:
-            print(f"check: {'passed' if status == 0 else 'FAILED'}")
+            word = out["latency_check"]["status"]
+            print(
+                f"check: {'passed' if status == 0 else 'FAILED'} ({word}"
+                + ("" if not replayed or args.paced else f"; {UNPACED_NOTE}")
+                + ")"
+            )
     return _finish(args, out, status)
 
 

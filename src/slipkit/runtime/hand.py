@@ -87,6 +87,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slipkit.errors import SlipkitError
+from slipkit.runtime.budget import UNPACED_NOTE
 from slipkit.runtime.bundle import DEFAULT_DEADLINE_S, Bundle, load_bundle
 from slipkit.runtime.errors import FrameError, OptionError
 from slipkit.runtime.loop import LoopResult, StreamLoop
@@ -676,7 +677,8 @@ def _ms(x: float | None) -> str:
 
 
 def table_lines(summaries: list[dict[str, Any]]) -> list[str]:
-    """The per-stream table ``slipkit-run --stream`` prints."""
+    """The per-stream table ``slipkit-run --stream`` prints (p99: the latency rule's,
+    :mod:`slipkit.runtime.budget`, judged against the budget in the verdict column)."""
     head = (
         f"{'stream':<12} {'bundle':<16} {'frames':>7} {'decisions':>9} {'bad':>5} "
         f"{'skipped':>7} {'p50 ms':>8} {'p99 ms':>8} {'max ms':>8} {'budget ms':>9} "
@@ -685,15 +687,19 @@ def table_lines(summaries: list[dict[str, Any]]) -> list[str]:
     lines = [head]
     for s in summaries:
         lat = s["latency_ms"] or {}
-        verdict = {True: "met", False: "MISSED", None: "no decisions"}[
-            s["within_budget"]
-        ]
+        judged = (s.get("latency_check") or {}).get("p99_ms")
+        # the latency rule's status (slipkit.runtime.budget): within, borderline, over
+        verdict = (
+            "no decisions"
+            if s["within_budget"] is None
+            else s["latency_check"]["status"]
+        )
         if s["error"]:
             verdict += " (stream failed)"
         lines.append(
             f"{s['stream'][:12]:<12} {s['bundle'][:16]:<16} {s['frames']:>7} "
             f"{s['decisions']:>9} {s['bad_frames']:>5} {s['skipped_windows']:>7} "
-            f"{_ms(lat.get('p50')):>8} {_ms(lat.get('p99')):>8} {_ms(lat.get('max')):>8} "
+            f"{_ms(lat.get('p50')):>8} {_ms(judged):>8} {_ms(lat.get('max')):>8} "
             f"{s['budget_ms']['p99']:>9.4f} {s['over_budget']:>5}  {verdict}"
         )
     return lines
@@ -806,7 +812,13 @@ def run_hand_cli(
     summaries = [stream_summary(s) for s in streams]
     print(
         f"hand: {len(streams)} streams, mode {args.hand_mode}"
-        + (", replays paced at their timestamps" if args.pace else "")
+        + (
+            ", replays paced at their timestamps"
+            if args.pace
+            else f", replays {UNPACED_NOTE}"
+            if any(b.kind == "replay" for b in bindings)
+            else ""
+        )
         + (", busy polling" if getattr(args, "busy_poll", False) else "")
         + (
             f", spinning {args.spin_us:g} us before each due frame"

@@ -108,8 +108,8 @@ decision frame then runs only the main graph. The work that does not need the ne
 frame is done one frame early, on a frame that otherwise only stores its values, and
 each frame's latency holds one of the two parts. The prepare frames' latency (arrival
 to the end of the prepare call; for hop 1 that frame's decision included) is recorded
-too (``prepare`` in the summary), and ``within_budget`` needs both p99s within the
-budget. A decision whose prepare did not run on the frame before (a direct call of
+too (``prepare`` in the summary), and the budget is judged on the decision and
+prepare frames pooled (:mod:`slipkit.runtime.budget`). A decision whose prepare did not run on the frame before (a direct call of
 :meth:`StreamLoop.step` after a skipped frame) runs it first, on the previous window
 (counted as ``late``): the score is the same, only slower. The prepare call skips the
 value check: its input's oldest frame is not part of the next window (and is dropped
@@ -128,6 +128,7 @@ import numpy as np
 import onnxruntime as ort
 from numpy.typing import ArrayLike, NDArray
 
+from slipkit.runtime.budget import frame_latency_us, judge_latency
 from slipkit.runtime.bundle import MODEL_FILE, Budget, Bundle
 from slipkit.runtime.errors import BundleError
 from slipkit.runtime.session import ORT_ERRORS
@@ -261,7 +262,7 @@ class LoopResult:
             counts[reason] += 1
         return counts
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self, paced: bool | None = None) -> dict[str, Any]:
         """Counts and latency percentiles, ms, against the budget (JSON-ready).
 
         ``decisions`` counts the valid (scored) windows, ``decisions_by_class`` the
@@ -271,9 +272,11 @@ class LoopResult:
         what the loop flagged (module docstring, *Bad frames*); ``state_resets``
         the times a recurrent state was zeroed (*Recurrent state*). With a prepare
         graph, ``prepare`` holds its frames' latency (``calls``, ``late``, and
-        :func:`latency_summary`'s fields; None without a prepare graph) and
-        ``within_budget`` is False when either the decisions' p99 or the prepare
-        frames' p99 is over the budget.
+        :func:`latency_summary`'s fields; None without a prepare graph).
+        ``latency_check`` is the latency rule's judgement of the decision and prepare
+        frames pooled (:func:`slipkit.runtime.budget.judge_latency`; ``paced`` says
+        whether the frames were paced) and ``within_budget`` its ``passed`` (None
+        without decisions).
         """
         out = {
             "bundle": self.name,
@@ -304,17 +307,20 @@ class LoopResult:
                 "late": self.prepare_late,
                 **prep,
             }
-            if out["within_budget"] is not None and prep["within_budget"] is not None:
-                out["within_budget"] = bool(
-                    out["within_budget"] and prep["within_budget"]
-                )
+        check = judge_latency(
+            frame_latency_us(self), self.budget.p99_ms * 1e3, paced=paced
+        )
+        out["latency_check"] = check.to_json()
+        out["within_budget"] = None if not len(self.slip) else check.passed
         return out
 
 
 def latency_summary(latency_ns: ArrayLike, budget: Budget) -> dict[str, Any]:
     """p50 / p99 / max / mean latency, ms, and the frames over the p99 budget and the period.
 
-    ``within_budget`` is ``p99 <= budget.p99_ms`` (None without decisions).
+    ``within_budget`` is the latency rule's ``passed`` on these latencies
+    (:func:`slipkit.runtime.budget.judge_latency`; None without decisions); ``p99``
+    is the plain p99, shown beside the judged one.
     """
     lat_ms = np.asarray(latency_ns, dtype=np.float64) / 1e6
     out: dict[str, Any] = {
@@ -333,7 +339,7 @@ def latency_summary(latency_ns: ArrayLike, budget: Budget) -> dict[str, Any]:
         },
         over_budget=int(np.sum(lat_ms > budget.p99_ms)),
         over_period=int(np.sum(lat_ms > budget.frame_period_ms)),
-        within_budget=bool(p99 <= budget.p99_ms),
+        within_budget=judge_latency(lat_ms * 1e3, budget.p99_ms * 1e3).passed,
     )
     return out
 
