@@ -148,10 +148,13 @@ def test_learned_detector_without_slip_onsets_is_refused() -> None:
         FSROnsetLogistic(polarity="falling").fit(v[:, None], np.zeros(len(v), int))
 
 
-def test_onset_calibration_puts_the_threshold_between_knock_noise_and_slips() -> None:
-    """The free threshold lies between the largest score outside the slips and the smallest slip."""
-    det = _fitted()
-    assert 0.0 < det.threshold_ <= 0.1
+def test_onset_calibration_puts_the_threshold_mid_gap() -> None:
+    """An unlabelled 0.04 V ringing release and a labelled 0.1 V slip: threshold 0.07 V."""
+    v = _slip(_slip(_held(), 400, 0.04), 700, 0.1)
+    y = np.zeros(len(v), int)
+    y[700:718] = 1
+    det = FSROnset(polarity="falling").fit(v[:, None], y)
+    assert 0.07 == round(det.threshold_, 12)
 
 
 @pytest.fixture(scope="module")
@@ -217,15 +220,15 @@ def test_hard_scene_slips_found_knocks_ignored(
 
 def test_independent_generator_slides_found_bumps_ignored() -> None:
     """On tests/baselines/test_conventions.py's generator (linear 0.5-2 ms falls that stay
-    down, linear-edged bumps), trained on its own 8 slides: all 20 test slides found, the
-    first within 10 ms in most, at most 2 of its bumps fired."""
+    down, linear-edged bumps), with a 1.5 ms release, trained on its own 8 slides: all 20
+    test slides found, the first within 10 ms in most, at most 2 of its bumps fired."""
     train = fsr_trials(100, 4, polarity="falling", slide=True) + fsr_trials(
         101, 4, polarity="rising", slide=True
     )
     X, y, seg = generator_stack(train)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PolarityWarning)
-        det = FSROnset().fit(X, y, segments=seg)
+        det = FSROnset(edge_s=0.0015, rebound_frac=0.15).fit(X, y, segments=seg)
     slides = fsr_trials(400, 10, polarity="rising", slide=True) + fsr_trials(
         401, 10, polarity="falling", slide=True
     )
