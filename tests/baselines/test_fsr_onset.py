@@ -247,3 +247,10 @@ def test_independent_generator_slides_found_bumps_ignored() -> None:
         float(np.median(delays)) <= 10.0,
         fired <= 2,
     )
+
+
+def test_compare_reads_the_onset_window() -> None:
+    """slipkit compare's cost table gives the onset detector its 8-sample window (4 ms), not 1."""
+    from slipkit.compare.adapters import _detector_window
+
+    assert (8, 8) == (_detector_window(FSROnset()), FSROnset().window_samples)
