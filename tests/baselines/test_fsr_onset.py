@@ -144,8 +144,30 @@ def test_training_data_without_a_touch_is_refused_naming_the_detector() -> None:
 def test_learned_detector_without_slip_onsets_is_refused() -> None:
     """No labelled slip: a SlipkitError saying which candidates are missing."""
     v = _slip(_held(), 700, 0.1)
-    with pytest.raises(SlipkitError, match=r"0 slip-onset and \d+ other candidate"):
+    with pytest.raises(SlipkitError, match=r"0 slip-onset and \d+ other touched"):
         FSROnsetLogistic(polarity="falling").fit(v[:, None], np.zeros(len(v), int))
+
+
+def test_learned_detector_trains_without_knocks() -> None:
+    """No other release of min_step_V in training (no knocks): the weaker touched releases
+    are its negatives, and it decides the slip 2 ms after it, nowhere else."""
+    rng = np.random.default_rng(5)
+    v = _slip(_held(), 700, 0.1) + rng.normal(0, 1e-3, 1200)
+    y = np.zeros(len(v), int)
+    y[700:718] = 1
+    det = FSROnsetLogistic(polarity="falling").fit(v[:, None], y)
+    held = _slip(_held(), 800, 0.1) + rng.normal(0, 1e-3, 1200)
+    hits = np.flatnonzero(det.decision_function(held[:, None]) >= det.threshold_)
+    assert [804] == hits.tolist()
+
+
+def test_onset_calibration_without_other_scores_halves_the_weakest_slip() -> None:
+    """Clean training data (only the 0.1 V slip scores): threshold 0.05 V, not 0.1 V."""
+    v = _slip(_held(), 700, 0.1)
+    y = np.zeros(len(v), int)
+    y[700:718] = 1
+    det = FSROnset(polarity="falling").fit(v[:, None], y)
+    assert 0.05 == round(det.threshold_, 12)
 
 
 def test_onset_calibration_puts_the_threshold_mid_gap() -> None:

@@ -41,8 +41,9 @@ clipped to +-2) and ``min(ln(E / size_V), 0)`` (small releases count against, la
 ones do not count for), into a logistic regression trained for early decisions: the
 positive samples are the first decisions on each labelled slip event (its release
 ending within ``onset_label_s`` of the event's onset), the rest of every event is left
-out, every other candidate (``E >= min_step_V``, touched) is negative; its score is the
-logit on candidates, ``-inf`` elsewhere.
+out, every other candidate (``E >= min_step_V``, touched) is negative (training data
+without such a release, no knocks: every other touched release); its score is the logit
+on candidates, ``-inf`` elsewhere.
 
 Both choose a free threshold for early, correct decisions (``calibration="onset"``,
 :meth:`FSROnset.onset_units`). The shapes they assume, and where they fail, are in
@@ -163,9 +164,10 @@ class FSROnset(OnsetCalibration, StreamDetector):
         How ``fit`` chooses a free threshold
         (:class:`~slipkit.baselines.generic.OnsetCalibration`, with the units of
         :meth:`onset_units`): ``"onset"`` for early, correct decisions -- every
-        training slip event's largest score in its first ``rebound_s`` + 1 ms against
-        every recording's largest score outside its events, best Youden point,
-        mid-gap; ``"sample"``: the per-sample ROC.
+        training slip event's largest score in its first ``edge_s + rebound_s`` + 1 ms
+        against every recording's largest score outside its events, best Youden point,
+        mid-gap (when nothing outside the events scores: half the weakest slip's
+        score); ``"sample"``: the per-sample ROC.
     threshold : float or None
         The smallest release ``E`` (V) that is slip; None: chosen by ``calibration``.
     roc_point : {"youden", "closest"}
@@ -324,6 +326,31 @@ class FSROnset(OnsetCalibration, StreamDetector):
         self, X: FloatArray, y: NDArray[Any], segments: ArrayLike | None
     ) -> None:
         """Learned detectors fit their model here (after the polarity, before the threshold)."""
+
+    def _calibrate(
+        self,
+        X: FloatArray,
+        y: NDArray[np.int_],
+        scores: FloatArray,
+        segments: ArrayLike | None,
+    ) -> None:
+        super()._calibrate(X, y, scores, segments)
+        if self.threshold is not None or self.calibration != "onset":
+            return
+        units, best = self.onset_units(y, scores, segments)
+        pos = best[(units == 1) & np.isfinite(best)]
+        if not len(pos) or np.isfinite(best[units == 0]).any() or pos.min() <= 0:
+            return
+        # Nothing outside the slips scores (clean training data): the mid-gap rule
+        # would sit on the weakest training slip, and a slightly weaker one would be
+        # missed; the gap is from 0 (no release; a logit of 0, p = 0.5) to it.
+        self.threshold_ = 0.5 * float(pos.min())
+        finite = np.where(np.isfinite(scores), scores, np.finfo(np.float64).min)
+        pred = finite >= self.threshold_
+        self.tpr_ = float(pred[y == 1].mean()) if (y == 1).any() else float("nan")
+        self.fnr_ = 1.0 - self.tpr_
+        self.fpr_ = float(pred[y == 0].mean()) if (y == 0).any() else float("nan")
+        self.tnr_ = 1.0 - self.fpr_
 
     def onset_units(
         self, y: NDArray[np.int_], scores: FloatArray, segments: ArrayLike | None
@@ -543,14 +570,18 @@ class FSROnsetLogistic(FSROnset):
         w = self.window_samples
         lag = self.rebound_samples  # from the release's end to its decision
         label_n = round(float(self.onset_label_s) * float(self.rate_hz))
-        parts, labels = [], []
+        parts, labels, small = [], [], []
         for a, b in segment_bounds(len(X), segments):
             s, first = self.signed(X[a:b, 0])
             if b - a < w or first >= b - a:
                 continue
-            feats, cand = self.features(self.columns(s))
+            cols = self.columns(s)
+            feats, cand = self.features(cols)
             ends = np.arange(w - 1, b - a)
-            cand &= (ends >= first) & np.isfinite(feats).all(axis=1)
+            ok = (ends >= first) & np.isfinite(feats).all(axis=1)
+            # any touched release, for data whose only large releases are slips
+            weak = ok & (cols[:, -1] - self._delta >= 0) & (cols[:, 0] > MIN_RELEASE_V)
+            cand &= ok
             label = np.zeros(b - a, dtype=int)
             used = np.ones(b - a, dtype=bool)
             for r0, r1 in _runs(yv[a:b] > 0):
@@ -563,14 +594,21 @@ class FSROnsetLogistic(FSROnset):
             keep = cand & used[ends]
             parts.append(feats[keep])
             labels.append(label[ends][keep])
+            small.append(feats[weak & ~cand & used[ends] & (label[ends] == 0)])
         F = np.vstack(parts) if parts else np.empty((0, len(FEATURES)))
         L = np.concatenate(labels) if labels else np.empty(0, dtype=int)
+        if not np.any(L == 0) and small:
+            # no other release of min_step_V (no knocks in the training data): every
+            # other touched release is a negative
+            weak_f = np.vstack(small)
+            F = np.vstack([F, weak_f])
+            L = np.concatenate([L, np.zeros(len(weak_f), dtype=int)])
         if len(np.unique(L)) < 2:
             raise SlipkitError(
                 f"{type(self).__name__}: the training recordings give "
                 f"{int(np.sum(L == 1))} slip-onset and {int(np.sum(L == 0))} other "
-                f"candidate releases (>= {self.min_step_V:g} V, touched); both are "
-                "needed (recordings with labelled slip events and pressed time)"
+                f"touched releases (candidates >= {self.min_step_V:g} V, else any); "
+                "both are needed (recordings with labelled slip events and pressed time)"
             )
         scaler = StandardScaler().fit(F)
         clf = LogisticRegression(
