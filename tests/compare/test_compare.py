@@ -170,9 +170,9 @@ def test_stream_detector_comparison_exports(tmp_path: Path) -> None:
     )
     compare_main(cfg)
     df = pd.read_csv(out / "metrics.csv")
-    assert 4 == len(df)
-    assert ["ok"] * 4 == df["export"].tolist()
-    assert [50.0] * 4 == df["budget_p99_us"].round(6).tolist()
+    assert 6 == len(df)
+    assert ["ok"] * 6 == df["export"].tolist()
+    assert [50.0] * 6 == df["budget_p99_us"].round(6).tolist()
     assert True == bool(np.isfinite(df["roc_auc"]).all())  # noqa: E712
     assert {"roc.png", "latency.png", "delays.png", "pareto.png"} <= {
         p.name for p in out.glob("*.png")

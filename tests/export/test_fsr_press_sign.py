@@ -427,7 +427,7 @@ def test_fixed_polarity_bundle_decides_as_the_detector_on_a_recording_of_the_oth
 
 def test_fsr_comparison_of_four_trials_exports_every_estimator(tmp_path: Path) -> None:
     """slipkit compare comparison=fsr with 4 trials (the demo's size; the 2 training
-    trials have one wiring, a held-out one the other): all four estimators export."""
+    trials have one wiring, a held-out one the other): all six estimators export."""
     import pandas as pd
 
     from slipkit.compare.commands import compare_main
@@ -447,10 +447,15 @@ def test_fsr_comparison_of_four_trials_exports_every_estimator(tmp_path: Path) -
     )
     compare_main(cfg)
     df = pd.read_csv(out / "metrics.csv")
-    assert ["fsr_roc", "fsr_paper", "fsr_robust", "window_logreg"] == df[
-        "estimator"
-    ].tolist()
-    assert ["ok"] * 4 == df["export"].tolist()
+    assert [
+        "fsr_roc",
+        "fsr_paper",
+        "fsr_robust",
+        "window_logreg",
+        "fsr_onset",
+        "fsr_onset_logistic",
+    ] == df["estimator"].tolist()
+    assert ["ok"] * 6 == df["export"].tolist()
     assert "falling" == read_run(out / "runs" / "fsr_paper").model.polarity_
 
 

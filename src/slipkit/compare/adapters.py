@@ -558,7 +558,8 @@ def _detector_window(model: Any) -> int:
             return int(p[key])
     if isinstance(p.get("block"), int):
         return 2 * int(p["block"])  # a backward difference of two block means
-    return 1
+    own = getattr(model, "window_samples", None)  # none of those: the detector says
+    return own if isinstance(own, int) else 1
 
 
 # -- force regression ---------------------------------------------------------------------

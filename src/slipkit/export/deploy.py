@@ -938,6 +938,16 @@ def _deploy_detection(
             f"{run.model.rest_samples} samples) and {sign}, latched on the gripper "
             "PC; start the loop (or reset it) at rest before each grasp"
         )
+    from slipkit.baselines.fsr_onset import FSROnset, slip_sign_step
+
+    if isinstance(run.model, FSROnset):
+        # the onset detectors read the same signed signal, per sample (block 1)
+        steps = [slip_sign_step(run.model)]
+        notes.append(
+            "press_sign: the stream's rest level (mean of its first "
+            f"{run.model.rest_samples} samples) and its wiring sign, latched on the "
+            "gripper PC; start the loop (or reset it) at rest before each grasp"
+        )
     return Deployment(
         # window and hop come from the graph (DetectorGraph.window / .hop)
         frame=_frame([stream], channels, 1, 1, rate),
