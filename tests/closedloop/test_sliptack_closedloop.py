@@ -51,9 +51,21 @@ def _slide(folder: Path) -> pd.Series:
     return results.groupby("detector")["slip_mm"].mean()
 
 
+def _quiet_slide(folder: Path, detector: str) -> pd.Series:
+    """Mean slide per detector over the trials where ``detector`` raised no false alarm
+    (an early grip step can pre-empt a slide), mm."""
+    results = pd.read_csv(folder / "results.csv")
+    key = ["seed", "condition_index", "trial"]
+    quiet = results[
+        (results["detector"] == detector) & ~results["false_alarm"].astype(bool)
+    ][key]
+    return results.merge(quiet, on=key).groupby("detector")["slip_mm"].mean()
+
+
 def test_bundle_lies_between_oracle_and_no_detector(small: Path) -> None:
-    """Mean slide: zero-delay oracle <= energy bundle <= no detector (every object lost)."""
-    slide = _slide(small)
+    """Mean slide over the trials where the bundle raised no false alarm: zero-delay
+    oracle <= energy bundle <= no detector (every object lost)."""
+    slide = _quiet_slide(small, "energy_k1")
     summary = pd.read_csv(small / "summary.csv").set_index("detector")
     assert (True, True, 100.0) == (
         bool(slide["oracle"] <= slide["energy_k1"]),
@@ -103,12 +115,13 @@ def test_bad_plant_override_is_refused(tmp_path: Path) -> None:
 def test_default_scenario_keeps_the_order_and_exports_the_threshold(
     tmp_path: Path,
 ) -> None:
-    """The default run (3 seeds): oracle <= energy <= none; the speed graph carries 10 mm/s."""
+    """The default run (3 seeds), on the trials without a false alarm of the energy
+    bundle: oracle <= energy <= none; the speed graph carries 10 mm/s."""
     import json
 
     folder = tmp_path / "cl"
     _run(folder, [])
-    slide = _slide(folder)
+    slide = _quiet_slide(folder, "energy_k1")
     manifest = json.loads(
         (folder / "bundles" / "speed_10" / "manifest.json").read_text()
     )
