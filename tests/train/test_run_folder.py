@@ -250,6 +250,7 @@ def test_operating_point_counts_slips_early_alarms_false_alarms_and_delay() -> N
         "unknown_onset_trials": 0,
         "disturbances": 0,
         "cost": pytest.approx(0.63),
+        "cost_without_detector": pytest.approx(1.0),
     } == {
         k: v
         for k, v in point.items()

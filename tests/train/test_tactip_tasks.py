@@ -123,8 +123,11 @@ def search_spy(monkeypatch: pytest.MonkeyPatch) -> list[set[str]]:
 
 # -- experiment=tactip_svm ------------------------------------------------------
 def test_tactip_svm_run_writes_every_file(svm_run: Path) -> None:
-    """experiment=tactip_svm writes the run files and the test predictions."""
-    assert RUN_FILES | {"test_predictions.csv"} == {p.name for p in svm_run.iterdir()}
+    """experiment=tactip_svm writes the run files, the test predictions and the per-trial
+    events at the chosen debounce."""
+    assert RUN_FILES | {"test_predictions.csv", "test_events.csv"} == {
+        p.name for p in svm_run.iterdir()
+    }
     info = json.loads((svm_run / "run.json").read_text())
     assert "validation.balanced_accuracy" == info["objective"]["name"]
     m = metrics_of(svm_run)
