@@ -143,3 +143,27 @@ def test_pace_with_choose_session_is_refused(generous: LinearCase) -> None:
         2,
         "slipkit-run: error: --pace: --choose-session measures the options back to back\n",
     ) == (proc.returncode, proc.stderr)
+
+
+def test_a_fast_sensor_is_paced_by_spinning() -> None:
+    """Frame periods under SPIN_BELOW_MS (2 kHz FSR) spin to each due time; 100 Hz sleeps."""
+    from slipkit.runtime.budget import pacing_spins
+
+    assert (True, False, False) == (
+        pacing_spins(2000.0),
+        pacing_spins(100.0),
+        pacing_spins(float("nan")),
+    )
+
+
+def test_check_says_it_spins_for_a_fast_sensor(
+    generous: LinearCase,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """With the spin limit above the case's 10 ms period, --check paces by spinning and says so."""
+    from slipkit.runtime import budget
+
+    monkeypatch.setattr(budget, "SPIN_BELOW_MS", 20.0)
+    assert 0 == run([str(generous.path), "--check"])
+    assert "(100 Hz, spinning to each)" in capsys.readouterr().out

@@ -38,6 +38,7 @@ from slipkit.runtime.budget import (
     frame_latency_us,
     judge_p99,
     paced_frames,
+    pacing_spins,
 )
 
 
@@ -225,7 +226,9 @@ def time_bundle(
         n = paced_frames(n, m.frame.rate_hz)
     frames, times = frames[:n], times[:n]
     source = (
-        ReplayFeed(frames, times, pace=True) if pace else ReplaySource(frames, times)
+        ReplayFeed(frames, times, pace=True, busy_poll=pacing_spins(m.frame.rate_hz))
+        if pace
+        else ReplaySource(frames, times)
     )
     result = StreamLoop(bundle).run(source)
     lat = frame_latency_us(result)

@@ -10,6 +10,9 @@ Pacing
     an unpaced replay (frames back to back) understates a live loop's latency several
     times. A paced replay of ``n`` frames takes ``n / rate_hz`` seconds, so it is capped
     at :func:`paced_frames`: at most ``max(PACED_MIN_FRAMES, PACED_S * rate_hz)`` frames.
+    A sensor whose frame period is under :data:`SPIN_BELOW_MS` (the 2 kHz FSR) is
+    paced by spinning to each frame's due time (:func:`pacing_spins`), as a real-time
+    loop at that rate does: a sleep's wake-up alone is a large share of such a budget.
 Statistic
     Per-frame latency (arrival -> end of the frame's work) of the decision frames and
     of the prepare frames (bundles with a prepare graph), pooled; the p99 judged is the
@@ -41,6 +44,9 @@ P99_BLOCKS = 5
 PACED_S = 3.0
 #: ... unless that is fewer than this many frames (a slow sensor)
 PACED_MIN_FRAMES = 300
+#: a paced replay spins to each frame's due time, instead of sleeping, when the
+#: sensor's frame period is under this many milliseconds
+SPIN_BELOW_MS = 2.0
 #: what a judgement's ``status`` can be
 STATUSES = ("within", "borderline", "over", "not measured")
 #: what an unpaced replay says about its latency
@@ -50,12 +56,21 @@ STATISTIC = f"median of {P99_BLOCKS} block p99s"
 #: the rule in one paragraph (reports print it under a verdict)
 RULE_TEXT = (
     "Latency rule (the same for compare, the demo and slipkit-run --check): replay "
-    "frames paced at the sensor's rate (at most max("
+    "frames paced at the sensor's rate (spinning to each due time when the frame "
+    f"period is under {SPIN_BELOW_MS:g} ms; at most max("
     f"{PACED_MIN_FRAMES} frames, {PACED_S:g} s)); p99 = the {STATISTIC} of the "
     "per-frame latency (decision and prepare frames pooled; all seeds' frames in a "
     f"comparison); within when p99 <= {BORDERLINE:g} x the budget, borderline (passes, "
     f"flagged) up to {1 / BORDERLINE:g} x, over (fails) beyond."
 )
+
+
+def pacing_spins(rate_hz: float) -> bool:
+    """Whether a paced replay at ``rate_hz`` spins to each due time (frame period under
+    :data:`SPIN_BELOW_MS`) rather than sleeping."""
+    return bool(
+        math.isfinite(rate_hz) and rate_hz > 0 and 1e3 / rate_hz < SPIN_BELOW_MS
+    )
 
 
 def paced_frames(

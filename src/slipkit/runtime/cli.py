@@ -50,6 +50,7 @@ from slipkit.runtime.budget import (
     STATISTIC,
     UNPACED_NOTE,
     paced_frames,
+    pacing_spins,
 )
 from slipkit.runtime.bundle import (
     DEFAULT_DEADLINE_S,
@@ -620,6 +621,11 @@ def _run_source(
         elif args.paced:
             n = paced_frames(n, bundle.manifest.frame.rate_hz)
         frames, times = frames[:n], times[:n]
+        # the latency rule spins for a fast sensor unless told how to wait
+        args.spinning = bool(
+            args.busy_poll
+            or (not args.spin_us and pacing_spins(bundle.manifest.frame.rate_hz))
+        )
         if args.paced:
             # the runtime's own pacing (the hand's replay feed): each frame handed over
             # at its timestamp, as the sensor would
@@ -628,7 +634,7 @@ def _run_source(
                     frames,
                     times,
                     pace=True,
-                    busy_poll=args.busy_poll,
+                    busy_poll=args.spinning,
                     spin_ns=int(args.spin_us * 1000),
                 )
             )
@@ -749,7 +755,9 @@ def run(argv: Sequence[str] | None = None) -> int:
         if replayed:
             print(
                 f"paced: {out['frames']} frames at their timestamps ("
-                f"{bundle.manifest.frame.rate_hz:g} Hz)"
+                f"{bundle.manifest.frame.rate_hz:g} Hz"
+                + (", spinning to each" if getattr(args, "spinning", False) else "")
+                + ")"
                 if args.paced
                 else UNPACED_NOTE
             )
