@@ -396,7 +396,7 @@ def _peak_value(
         axis=2,
     )  # (b, 1, 3 c)
     lower, mid, upper = (g._fresh(n) for n in ("lower", "mid", "upper"))
-    split = {"num_outputs": 3} if g.opset >= 18 else {}
+    split: dict[str, Any] = {"num_outputs": 3} if g.opset >= 18 else {}
     g.nodes.append(
         helper.make_node("Split", [trip], [lower, mid, upper], axis=2, **split)
     )
