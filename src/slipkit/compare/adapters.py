@@ -30,7 +30,7 @@ Unified columns (:data:`ROW_COLUMNS`; a missing one is NaN):
   for one decision) and ``decision_frames`` (frames from the first one it reads to a
   declared slip, with the online debounce).
 
-Trial events (TacTip, issue 14's target measure; beside :data:`ROW_COLUMNS`, see
+Trial events (TacTip's target measure; beside :data:`ROW_COLUMNS`, see
 :func:`trial_events`): the TacTip frame task (SVMs) labels 4 slip frames per trial and
 the stream task (pin-motion detector) every frame from the onset on, so their frame
 rates measure two different things. Both tasks' decision rules (the frame task's
@@ -90,7 +90,7 @@ ROW_COLUMNS = (
 )
 
 
-#: frames after the onset frame within which a slip's first alarm is on time (issue 14's
+#: frames after the onset frame within which a slip's first alarm is on time (the
 #: TacTip target: "within 2 frames of onset, with no alarm before onset")
 ON_TIME_FRAMES = 2
 

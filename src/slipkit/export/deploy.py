@@ -886,7 +886,7 @@ def _deploy_detection(
         # The batch detector measures its baseline per recording; the graph needs a
         # fixed one: the median over the training recordings (the exporter's helper).
         # The graph then computes the detector with that fixed baseline, so parity
-        # checks it against that detector (issue 16: against the per-recording one the
+        # checks it against that detector (against the per-recording one the
         # scores differ by the ratio of the baselines, not by rounding), and the note
         # states how often it decides as the trained detector on the held-out trials.
         from slipkit.export.detectors import (
@@ -921,7 +921,7 @@ def _deploy_detection(
     if isinstance(run.model, FSRTouchSlip) and run.model.input == "voltage":
         # The runtime takes each stream's rest level from its first samples (the
         # press_sign op), as the batch detector does per recording, so a stream of the
-        # other wiring is never touched, as in the batch detector (issue 14); training
+        # other wiring is never touched, as in the batch detector; training
         # wirings of both signs: the press direction is latched at its first press
         # too. The graph reads the sign-normalised signal (export_fsr_touch_slip).
         from slipkit.export.detectors import fsr_press_sign_step
