@@ -91,6 +91,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from slipkit._registry import Registry
 from slipkit.data.dataset import Dataset
 from slipkit.errors import SlipkitError
 from slipkit.runtime.preprocessing import Pipeline
@@ -323,23 +324,21 @@ def _stratified_order(
 
 Deployer = Callable[[Task, Run, Dataset, Mapping[str, Any]], Deployment]
 
-_DEPLOYERS: dict[type, Deployer] = {}
+_DEPLOYERS: Registry[type, Deployer] = Registry(
+    "deployer", error=SlipkitError, n_args=4, key_type=type
+)
 
 
 def register_deployer(cls: type, fn: Deployer, *, overwrite: bool = False) -> None:
     """Register ``fn(task, run, dataset, options) -> Deployment`` for task class ``cls``."""
-    if cls in _DEPLOYERS and not overwrite:
-        raise SlipkitError(
-            f"a deployer is already registered for {cls.__qualname__}; pass overwrite=True"
-        )
-    _DEPLOYERS[cls] = fn
+    _DEPLOYERS.register(cls, fn, overwrite=overwrite)
 
 
 def deployer_for(task: Task) -> Deployer:
     """The deployer of ``task``'s class or its nearest registered base (SlipkitError if none)."""
-    for base in type(task).__mro__:
-        if base in _DEPLOYERS:
-            return _DEPLOYERS[base]
+    found = _DEPLOYERS.for_class(type(task))
+    if found is not None:
+        return found
     known = ", ".join(sorted(c.__name__ for c in _DEPLOYERS))
     raise SlipkitError(
         f"slipkit export does not know how to deploy task {type(task).__name__} "
