@@ -43,7 +43,7 @@ def test_a_wrong_signature_or_key_type_is_refused_where_it_is_registered() -> No
     reg: Registry[Any, Any] = Registry("exporter", n_args=2, key_type=type)
     with pytest.raises(TypeError, match=r"must accept 2 positional"):
         reg.register(int, _one)
-    with pytest.raises(TypeError, match="key must be a type"):
+    with pytest.raises(TypeError, match="needs a class as its key"):
         reg.register("int", _two)
     with pytest.raises(TypeError, match="not callable"):
         reg.register(int, 3)

@@ -98,9 +98,9 @@ class Registry(Mapping[K, V], Generic[K, V]):
     def register(self, key: K, value: V, *, overwrite: bool = False) -> V:
         """Add ``value`` under ``key``; returns ``value`` (usable inside decorators)."""
         if self.key_type is not None and not isinstance(key, self.key_type):
+            what = "class" if self.key_type is type else self.key_type.__name__
             raise TypeError(
-                f"{self.kind} registry: the key must be a {self.key_type.__name__}; "
-                f"got {key!r}"
+                f"{self.kind} registration needs a {what} as its key; got {key!r}"
             )
         if self.n_args is not None:
             if not callable(value):
