@@ -6,9 +6,9 @@ Both detectors' scores are one linear filter of the window plus a constant
 signed least-squares slope (mm/s), the learned one's the logit with its scaler and
 coefficients folded in. The graph reads the raw float32 window ``(batch, W, 1)``
 (oldest first), casts it to float64 (the batch detector's precision), and computes
-``x @ w + b`` in one ``MatMul`` and an ``Add``; ``NO_SCORE`` (the lowest float32, as
+``x @ w + b`` in one ``MatMul`` (and an ``Add`` for the learned bias); ``NO_SCORE`` (the lowest float32, as
 every detector graph) where the result is not finite (a NaN or infinite sample: the
-batch detector's ``-inf``). Seven nodes, called on every frame (``hop`` 1).
+batch detector's ``-inf``). Eight or nine nodes, called on every frame (``hop`` 1).
 """
 
 from __future__ import annotations
@@ -48,7 +48,8 @@ def export_sliptack_onset(
     inp, x = _prologue(g, w, 1)
     flat = g.op("Reshape", x, g.const([-1, w], np.int64), stem="flat")
     lin = g.op("MatMul", flat, g.const(detector.weights(), np.float64), stem="filter")
-    score = g.op("Add", lin, g.const(detector.bias(), np.float64), stem="score64")
+    bias = detector.bias()
+    score = g.op("Add", lin, g.const(bias, np.float64), stem="score64") if bias else lin
     gated = g.op("Where", _not_finite(g, score), g.const(NO_SCORE, np.float64), score)
     if learned:
         what = "the logit of the window's slopes and bend (SlipTackOnsetLogistic)"
