@@ -36,10 +36,11 @@ test: $(STAMP) ## run the default test suite (no slow tests)
 test-full: $(STAMP) ## run every test, slow ones included
 	$(BIN)/python -m pytest -q
 
-lint: $(STAMP) ## ruff and mypy on src/
+lint: $(STAMP) ## ruff, mypy and the import layers (lint-imports) on src/
 	$(BIN)/ruff check src tests benchmarks
 	$(BIN)/ruff format --check src tests benchmarks
 	$(BIN)/mypy
+	$(BIN)/lint-imports --no-cache
 
 bench: $(STAMP) ## run the benchmarks in benchmarks/
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done

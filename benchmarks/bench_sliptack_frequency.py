@@ -42,7 +42,7 @@ VARIANTS: dict[str, dict[str, Any]] = {
         "harmonics": "keep",
         "interpolate": False,
     },
-    "before issue 14 (ratio 0.6, bins)": {"harmonics": "keep", "interpolate": False},
+    "bin frequencies (ratio 0.6)": {"harmonics": "keep", "interpolate": False},
     "+ harmonic check": {"harmonics": "fundamental", "interpolate": False},
     "+ interpolation, no harmonic check": {"harmonics": "keep"},
     "+ zero padding x8": {

@@ -11,8 +11,8 @@ import pandas as pd
 import pytest
 
 import slipkit.cli as cli
-from slipkit.compare.aggregate import aggregate
 from slipkit.errors import SlipkitWarning
+from slipkit.evaluate.aggregate import aggregate
 from slipkit.models.svm import TacTipSVM
 
 

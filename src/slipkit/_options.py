@@ -488,3 +488,28 @@ __all__ = [
     "unknown_key",
     "within",
 ]
+
+
+def one_line(text: str) -> str:
+    """``text`` on one line: its non-blank lines joined with ``; `` (tabs and indents dropped)."""
+    parts = [" ".join(line.split()) for line in str(text).splitlines()]
+    parts = [p for p in parts if p]
+    # "Could not override 'x'." + "Key 'x' is not in struct" -> "...'x'; Key ..."
+    head = [p.rstrip(".:") for p in parts[:-1]]
+    return "; ".join([*head, *parts[-1:]]) or "(no message)"
+
+
+def composition_message(exc: Exception) -> str:
+    """One line for an error Hydra or OmegaConf raised while composing the config."""
+    from hydra.errors import MissingConfigException, OverrideParseException
+
+    if isinstance(exc, MissingConfigException) and exc.options:
+        first = str(exc).splitlines()[0]
+        return f"{first}; available: {', '.join(map(str, exc.options))}"
+    if isinstance(exc, OverrideParseException):
+        return f"{exc.override}: {exc.message}"
+    text = str(exc)
+    cause = exc.__cause__
+    if cause is not None and str(cause) and str(cause) not in text:
+        text = f"{text}\n{cause}"
+    return text

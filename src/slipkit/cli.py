@@ -20,6 +20,8 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any, NoReturn, TextIO
 
+from slipkit._options import composition_message, one_line
+
 #: subcommand -> ("module:function", one-line help). Each function takes the composed DictConfig.
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "import": (
@@ -126,15 +128,6 @@ def _resolve(target: str) -> Callable[[Any], Any]:
     return fn
 
 
-def one_line(text: str) -> str:
-    """``text`` on one line: its non-blank lines joined with ``; `` (tabs and indents dropped)."""
-    parts = [" ".join(line.split()) for line in str(text).splitlines()]
-    parts = [p for p in parts if p]
-    # "Could not override 'x'." + "Key 'x' is not in struct" -> "...'x'; Key ..."
-    head = [p.rstrip(".:") for p in parts[:-1]]
-    return "; ".join([*head, *parts[-1:]]) or "(no message)"
-
-
 def _close_progress_bars() -> None:
     """End any live tqdm bar, so the message starts on its own line, not after a bar."""
     tqdm_module = sys.modules.get("tqdm")
@@ -199,22 +192,6 @@ def _hydra_raises() -> Iterator[None]:
             os.environ.pop("HYDRA_FULL_ERROR", None)
         else:
             os.environ["HYDRA_FULL_ERROR"] = saved
-
-
-def _composition_message(exc: Exception) -> str:
-    """One line for an error Hydra or OmegaConf raised while composing the config."""
-    from hydra.errors import MissingConfigException, OverrideParseException
-
-    if isinstance(exc, MissingConfigException) and exc.options:
-        first = str(exc).splitlines()[0]
-        return f"{first}; available: {', '.join(map(str, exc.options))}"
-    if isinstance(exc, OverrideParseException):
-        return f"{exc.override}: {exc.message}"
-    text = str(exc)
-    cause = exc.__cause__
-    if cause is not None and str(cause) and str(cause) not in text:
-        text = f"{text}\n{cause}"
-    return text
 
 
 def _is_group_override(override: Any) -> bool:
@@ -305,7 +282,7 @@ def _not_in_config(sub: str, exc: Exception, overrides: Sequence[str]) -> str | 
     from slipkit._options import unknown_key
 
     found = re.search(r"Could not override '([^']+)'", str(exc))
-    if found is None or "not in struct" not in _composition_message(exc):
+    if found is None or "not in struct" not in composition_message(exc):
         return None
     key = found.group(1)
     reference = _reference_config(sub, overrides)
@@ -505,7 +482,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         # The overrides do not compose (unknown group option, key not in the config,
         # override syntax): Hydra's message, on one line; a key not in the config
         # with the closest keys it has.
-        text = _not_in_config(sub, exc, overrides) or _composition_message(exc)
+        text = _not_in_config(sub, exc, overrides) or composition_message(exc)
         _fail(sub, f"error: {text}", 2)
     except KeyboardInterrupt:
         _fail(sub, "interrupted", 130)

@@ -9,10 +9,10 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from slipkit.compare.aggregate import aggregate
 from slipkit.compare.report import cell, verdict
 from slipkit.compare.table import block_p99, choose_deploy, seed_table
 from slipkit.errors import SlipkitError
+from slipkit.evaluate.aggregate import aggregate
 
 
 def _runs() -> pd.DataFrame:

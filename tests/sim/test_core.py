@@ -91,7 +91,7 @@ def test_unnamed_effects_are_never_called(monkeypatch: pytest.MonkeyPatch) -> No
             called.append(_name)
             return _real(state, rng, **kw)
 
-        monkeypatch.setitem(EFFECTS, name, spy)
+        monkeypatch.setitem(EFFECTS._entries, name, spy)
     scene = Scene(
         "ramp", Ramp(), {"white_noise": {"target": "sig", "sigma": [0.1, 0.2]}}
     )
@@ -126,7 +126,7 @@ def test_variants_call_exactly_their_listed_effects_in_order(
             called.append(_name)
             return _real(state, rng, **kw)
 
-        monkeypatch.setitem(EFFECTS, effect, spy)
+        monkeypatch.setitem(EFFECTS._entries, effect, spy)
     with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
         cfg = compose(config_name="simulate", overrides=[f"scene={name}"])
     scene = build_scene(cfg.scene)

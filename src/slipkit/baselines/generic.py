@@ -1,4 +1,4 @@
-"""Generic slip detectors for a sensor slipkit has no model of (issue 14, "your own sensor").
+"""Generic slip detectors for a sensor slipkit has no model of ("your own sensor").
 
 The analytic one reads any stream of any number of channels, as every
 :class:`~slipkit.baselines.base.StreamDetector` (batch and streaming forms agree, state

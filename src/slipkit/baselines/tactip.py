@@ -1,4 +1,4 @@
-"""Analytic TacTip slip detector: pooled pin motion, any pin count (issue 14).
+"""Analytic TacTip slip detector: pooled pin motion, any pin count.
 
 The paper's SVM (:mod:`slipkit.models.svm`) reads one feature per pin, so it is tied to
 the pin count and layout it was trained on. :class:`PinMotionDetector` reads the raw

@@ -70,9 +70,9 @@ def _compose(name: str, overrides: list[str], where: str = "") -> DictConfig:
     try:
         return compose(config_name=name, overrides=overrides)
     except (HydraException, OmegaConfBaseException) as exc:
-        from slipkit.cli import _composition_message, one_line
+        from slipkit._options import composition_message, one_line
 
-        text = one_line(_composition_message(exc))
+        text = one_line(composition_message(exc))
         raise SlipkitError(f"{where or name}: {text}") from None
 
 

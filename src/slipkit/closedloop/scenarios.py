@@ -48,6 +48,7 @@ import importlib
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, Protocol, TypeVar, runtime_checkable
 
+from slipkit._registry import Registry
 from slipkit.errors import SlipkitError
 
 if TYPE_CHECKING:
@@ -93,7 +94,9 @@ class ClosedLoopScenario(Protocol):
 _T = TypeVar("_T")
 
 #: Registered scenario classes by family name.
-SCENARIOS: dict[str, type] = {}
+SCENARIOS: Registry[str, type] = Registry(
+    "closed-loop scenario", error=ValueError, key_type=str
+)
 
 
 def plant_params(scen: DictConfig) -> dict[str, Any]:
@@ -110,10 +113,7 @@ def register_scenario(name: str) -> Callable[[type[_T]], type[_T]]:
     """Class decorator: register a :class:`ClosedLoopScenario` under ``name``."""
 
     def deco(cls: type[_T]) -> type[_T]:
-        if name in SCENARIOS and SCENARIOS[name] is not cls:
-            raise ValueError(f"closed-loop scenario {name!r} is registered twice")
-        SCENARIOS[name] = cls
-        return cls
+        return SCENARIOS.register(name, cls)
 
     return deco
 

@@ -30,7 +30,7 @@ Unified columns (:data:`ROW_COLUMNS`; a missing one is NaN):
   for one decision) and ``decision_frames`` (frames from the first one it reads to a
   declared slip, with the online debounce).
 
-Trial events (TacTip, issue 14's target measure; beside :data:`ROW_COLUMNS`, see
+Trial events (TacTip's target measure; beside :data:`ROW_COLUMNS`, see
 :func:`trial_events`): the TacTip frame task (SVMs) labels 4 slip frames per trial and
 the stream task (pin-motion detector) every frame from the onset on, so their frame
 rates measure two different things. Both tasks' decision rules (the frame task's
@@ -55,7 +55,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from slipkit._registry import Registry
 from slipkit.data.dataset import Dataset
+from slipkit.errors import SlipkitError
 from slipkit.train.task import Task
 
 #: unified metric columns, in table order (costs are added by :mod:`.costs`)
@@ -90,7 +92,7 @@ ROW_COLUMNS = (
 )
 
 
-#: frames after the onset frame within which a slip's first alarm is on time (issue 14's
+#: frames after the onset frame within which a slip's first alarm is on time (the
 #: TacTip target: "within 2 frames of onset, with no alarm before onset")
 ON_TIME_FRAMES = 2
 
@@ -146,22 +148,25 @@ class RunView:
 
 
 Adapter = Callable[[RunView], Evaluation]
-_ADAPTERS: dict[type, Adapter] = {}
+_ADAPTERS: Registry[type, Adapter] = Registry(
+    "comparison adapter", error=SlipkitError, n_args=1, key_type=type
+)
 
 
-def register_adapter(task_cls: type, fn: Adapter) -> None:
-    """Use ``fn`` for tasks of ``task_cls`` (and subclasses without their own)."""
-    _ADAPTERS[task_cls] = fn
+def register_adapter(task_cls: type, fn: Adapter, *, overwrite: bool = False) -> None:
+    """Use ``fn`` for tasks of ``task_cls`` (and subclasses without their own); a second
+    adapter for the same class is refused unless ``overwrite=True``."""
+    _ADAPTERS.register(task_cls, fn, overwrite=overwrite)
 
 
 def adapt(view: RunView) -> Evaluation:
     """The unified evaluation of ``view`` by the adapter of its task's class."""
-    for cls in type(view.task).__mro__:
-        if cls in _ADAPTERS:
-            ev = _ADAPTERS[cls](view)
-            for col in ROW_COLUMNS:
-                ev.row.setdefault(col, math.nan)
-            return ev
+    fn = _ADAPTERS.for_class(type(view.task))
+    if fn is not None:
+        ev = fn(view)
+        for col in ROW_COLUMNS:
+            ev.row.setdefault(col, math.nan)
+        return ev
     raise TypeError(
         f"no comparison adapter for task {type(view.task).__name__}; register one with "
         "slipkit.compare.adapters.register_adapter"

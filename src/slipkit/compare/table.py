@@ -532,7 +532,7 @@ def seed_table(
 ) -> pd.DataFrame:
     """The comparison table of several seeds: one row per estimator, means with their spread.
 
-    Every numeric column is averaged over the seeds (:func:`slipkit.compare.aggregate.aggregate`)
+    Every numeric column is averaged over the seeds (:func:`slipkit.evaluate.aggregate.aggregate`)
     and its sample standard deviation kept as ``<column>_std`` (the CI half-width as
     ``<column>_ci``); ``n_seeds`` counts the seeds. ``p50_us`` / ``p99_us`` are taken on
     all seeds' frames pooled (``latencies``: estimator -> latencies in us, in order),
@@ -556,7 +556,7 @@ def seed_table(
     pandas.DataFrame
         A :func:`build_table` table with the extra ``_std``, ``_ci`` and ``n_seeds`` columns.
     """
-    from slipkit.compare.aggregate import aggregate
+    from slipkit.evaluate.aggregate import aggregate
 
     numeric = [
         c

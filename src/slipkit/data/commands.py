@@ -42,7 +42,7 @@ def import_main(cfg: DictConfig) -> Path:
 
 def info_main(cfg: DictConfig) -> dict[str, Any]:
     """Print the summary of the dataset folder ``cfg.dataset``."""
-    # a chunk of trials at a time: memory does not grow with the recording (issue 17)
+    # a chunk of trials at a time: memory does not grow with the recording
     info = summary_of_folder(Path(str(cfg.dataset)), verify=bool(cfg.verify))
     if cfg.json:
         print(json.dumps(info, indent=2, default=str))

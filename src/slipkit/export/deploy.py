@@ -91,6 +91,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from slipkit._registry import Registry
 from slipkit.data.dataset import Dataset
 from slipkit.errors import SlipkitError
 from slipkit.runtime.preprocessing import Pipeline
@@ -323,23 +324,21 @@ def _stratified_order(
 
 Deployer = Callable[[Task, Run, Dataset, Mapping[str, Any]], Deployment]
 
-_DEPLOYERS: dict[type, Deployer] = {}
+_DEPLOYERS: Registry[type, Deployer] = Registry(
+    "deployer", error=SlipkitError, n_args=4, key_type=type
+)
 
 
 def register_deployer(cls: type, fn: Deployer, *, overwrite: bool = False) -> None:
     """Register ``fn(task, run, dataset, options) -> Deployment`` for task class ``cls``."""
-    if cls in _DEPLOYERS and not overwrite:
-        raise SlipkitError(
-            f"a deployer is already registered for {cls.__qualname__}; pass overwrite=True"
-        )
-    _DEPLOYERS[cls] = fn
+    _DEPLOYERS.register(cls, fn, overwrite=overwrite)
 
 
 def deployer_for(task: Task) -> Deployer:
     """The deployer of ``task``'s class or its nearest registered base (SlipkitError if none)."""
-    for base in type(task).__mro__:
-        if base in _DEPLOYERS:
-            return _DEPLOYERS[base]
+    found = _DEPLOYERS.for_class(type(task))
+    if found is not None:
+        return found
     known = ", ".join(sorted(c.__name__ for c in _DEPLOYERS))
     raise SlipkitError(
         f"slipkit export does not know how to deploy task {type(task).__name__} "
@@ -886,7 +885,7 @@ def _deploy_detection(
         # The batch detector measures its baseline per recording; the graph needs a
         # fixed one: the median over the training recordings (the exporter's helper).
         # The graph then computes the detector with that fixed baseline, so parity
-        # checks it against that detector (issue 16: against the per-recording one the
+        # checks it against that detector (against the per-recording one the
         # scores differ by the ratio of the baselines, not by rounding), and the note
         # states how often it decides as the trained detector on the held-out trials.
         from slipkit.export.detectors import (
@@ -921,7 +920,7 @@ def _deploy_detection(
     if isinstance(run.model, FSRTouchSlip) and run.model.input == "voltage":
         # The runtime takes each stream's rest level from its first samples (the
         # press_sign op), as the batch detector does per recording, so a stream of the
-        # other wiring is never touched, as in the batch detector (issue 14); training
+        # other wiring is never touched, as in the batch detector; training
         # wirings of both signs: the press direction is latched at its first press
         # too. The graph reads the sign-normalised signal (export_fsr_touch_slip).
         from slipkit.export.detectors import fsr_press_sign_step

@@ -11,7 +11,7 @@ defaults ``strict`` to False, where the registry's
 ``predict``). Inside, every graph casts the window to float64, so
 the only rounding that differs from the batch detector is the float32 input. The FSR
 graphs instead read the float64 window itself, shape ``(batch, W)`` (one channel), and
-return a float64 score: no cast nodes, no float32 rounding (issue 16).
+return a float64 score: no cast nodes, no float32 rounding.
 
 * :class:`~slipkit.baselines.fsr.FSRTouchSlip` -- ``W = 2 block`` (10): the two
   block means, their backward difference over the cycle time, one sign, the touch
@@ -24,7 +24,7 @@ return a float64 score: no cast nodes, no float32 rounding (issue 16).
   wirings of both signs), the sign latched at the stream's first press, and the graph
   reads ``sign * (v - v_rest)`` with rest 0 and the paper's sign: its rest and gate
   are the recording's own, so a recording of the other wiring is never touched, as
-  in the batch detector (issue 14). Force input, or an explicit ``rest=...``: the
+  in the batch detector. Force input, or an explicit ``rest=...``: the
   gate is against a **fixed rest voltage**, a calibration constant in the graph.
 * :class:`~slipkit.baselines.biotac.ForceDerivative` -- ``W = span + 1`` (4):
   ``Ft = sqrt(fx^2 + fy^2)`` (or ``Ft`` itself) at both ends, ``-(Ft[-1] - Ft[0])
@@ -1285,7 +1285,7 @@ def check_detector_parity(
     gate_eps: float | None = None,
     session: Any | None = None,
 ) -> dict[str, Any]:
-    """Compare a detector graph in onnxruntime with the batch detector (issue 6's rule).
+    """Compare a detector graph in onnxruntime with the batch detector.
 
     The batch detector scores the recordings as given (float64); the graph runs on
     the windows the runtime would feed it (:func:`detector_windows`: float32, or

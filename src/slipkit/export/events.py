@@ -1,4 +1,4 @@
-"""Exporter of the learned DAVIS event-frame classifier (issue 14).
+"""Exporter of the learned DAVIS event-frame classifier.
 
 :class:`~slipkit.models.events.EventFrameClassifier` reads, per ``frame_s`` frame of
 events, the positive and negative event counts and areas (distinct pixels that fired)

@@ -1,4 +1,4 @@
-"""Parity of an exported graph with its estimator, on held-out frames (issue 6's rule).
+"""Parity of an exported graph with its estimator, on held-out frames.
 
 :func:`check_parity` compares the graph with the estimator window by window;
 :func:`stream_parity` runs a bundle's loop over the held-out recordings as one

@@ -22,6 +22,7 @@ from typing import Any, Literal
 import numpy as np
 import onnx
 
+from slipkit._registry import Registry
 from slipkit.errors import SlipkitError
 
 #: IR version written into every graph: onnxruntime 1.31 refuses IR 14 (onnx 1.23's
@@ -171,7 +172,9 @@ class ExportedGraph:
 
 Exporter = Callable[..., ExportedGraph]
 
-_EXPORTERS: dict[type, Exporter] = {}
+_EXPORTERS: Registry[type, Exporter] = Registry(
+    "exporter", error=ExportError, n_args=1, key_type=type
+)
 
 
 def register_exporter(cls: type, fn: Exporter, *, overwrite: bool = False) -> None:
@@ -187,21 +190,12 @@ def register_exporter(cls: type, fn: Exporter, *, overwrite: bool = False) -> No
         Replace an exporter already registered for exactly ``cls``; without it a
         second registration raises, as in sklearn-onnx's ``register_converter``.
     """
-    if not isinstance(cls, type):
-        raise TypeError(f"register_exporter needs a class; got {cls!r}")
-    if not callable(fn):
-        raise TypeError(f"exporter for {cls.__qualname__} is not callable: {fn!r}")
-    if cls in _EXPORTERS and not overwrite:
-        raise ExportError(
-            f"an exporter is already registered for {_qualified(cls)} "
-            f"({_qualified(_EXPORTERS[cls])}); pass overwrite=True to replace it"
-        )
-    _EXPORTERS[cls] = fn
+    _EXPORTERS.register(cls, fn, overwrite=overwrite)
 
 
 def unregister_exporter(cls: type) -> None:
     """Remove the exporter registered for exactly ``cls`` (KeyError if none)."""
-    del _EXPORTERS[cls]
+    _EXPORTERS.unregister(cls)
 
 
 def exporter_for(estimator: Any) -> Exporter:
@@ -213,9 +207,9 @@ def exporter_for(estimator: Any) -> Exporter:
         When neither the class nor any base in its MRO has an exporter.
     """
     cls = estimator if isinstance(estimator, type) else type(estimator)
-    for base in cls.__mro__:
-        if base in _EXPORTERS:
-            return _EXPORTERS[base]
+    found = _EXPORTERS.for_class(cls)
+    if found is not None:
+        return found
     raise NoExporterError(
         f"no ONNX exporter is registered for {_qualified(cls)} or its bases "
         f"({', '.join(_qualified(b) for b in cls.__mro__[1:])}); register one with "

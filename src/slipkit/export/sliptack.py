@@ -58,14 +58,14 @@ that varies by less than float32 resolution is constant for the graph (NaN) but 
 always for the batch form, and with the ``f_max`` range reaching saturation a
 frequency within 1e-9 relative below it has no score (the table's last row).
 
-Cost (issue 16; figures in docs/deploy.md, ``benchmarks/bench_deploy.py --only
+Cost (figures in docs/deploy.md, ``benchmarks/bench_deploy.py --only
 sliptack``): at batch 1 a small node costs its dispatch and a large one its
 arithmetic; the per-``f_max`` ``TopK`` over ``(n_fmax, c)`` was the largest node
 (and grows with the number of peaks); the shipped detector config's graph has 73
 nodes (84 before).
 
 Prepared spectrum (``prepare=True``, the export default through ``slipkit export``'s
-``regression.prepare``; issue 16). Steps 1-2 are linear in the samples, so the DFT of a
+``regression.prepare``). Steps 1-2 are linear in the samples, so the DFT of a
 decision's window is the DFT of the same window with its newest sample replaced by the
 one before it, plus ``(x[W - 1] - x[W - 2])`` times a constant column
 (:func:`last_sample_column`). The export then writes two graphs: a *prepare* graph
@@ -370,7 +370,7 @@ def _peak_value(
     ``f_max`` without a peak adds 0 to the sum and to the count, and with no peak at
     all the sum is 0 (the count is clamped to 1 x n_peaks).
 
-    Cost (issue 16): the per-``f_max`` ``TopK`` over ``(n_fmax, c)`` was the largest
+    Cost: the per-``f_max`` ``TopK`` over ``(n_fmax, c)`` was the largest
     node of the graph (~15 us of ~75 at batch 1, more on spectra with many peaks); the
     peaks are sorted once now, and the ranks per ``f_max`` are one ``CumSum`` over
     ``(K, n_sets)``, ``K = (c + 1) // 2``, with the weights of :func:`peak_ranks`.
@@ -396,7 +396,7 @@ def _peak_value(
         axis=2,
     )  # (b, 1, 3 c)
     lower, mid, upper = (g._fresh(n) for n in ("lower", "mid", "upper"))
-    split = {"num_outputs": 3} if g.opset >= 18 else {}
+    split: dict[str, Any] = {"num_outputs": 3} if g.opset >= 18 else {}
     g.nodes.append(
         helper.make_node("Split", [trip], [lower, mid, upper], axis=2, **split)
     )
@@ -495,7 +495,7 @@ def _peak_value(
     valid = g.op("Sign", qs)  # (b, 1, K)
     n_peaks = int(est.n_peaks)
     cols, mult, ((alpha_n, has_n)) = peak_ranks(freqs[1 : c + 1], fmax, n_peaks)
-    # The (K, n_sets) rank tables in float32 (issue 16: their ~11 elementwise ops on
+    # The (K, n_sets) rank tables in float32 (their ~11 elementwise ops on
     # 4300 values cost 25 us per call in float64, 16 in float32): eligibility, ranks
     # and counts are small whole numbers and H(r) sums of 1 / r (exact or within 6e-8
     # in float32); the values q stay float64 (one float64 product per f_max below).

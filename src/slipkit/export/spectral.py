@@ -245,7 +245,7 @@ def _feature_graph(
     ``shared_dft``: both spectra (``f_d``'s and the features') through one DFT
     (:func:`twiddle_dft_matrices`, the two tapered windows stacked); False: each its own
     DFT (``sliptack._frequency`` for ``f_d``, :func:`_power` for the features), the
-    graph before issue 16's cost fix, kept for the side-by-side benchmark.
+    slower graph, kept for the side-by-side benchmark.
     """
     w, rate = int(est.window), float(est.rate_hz)
     n_bands, n_peaks = int(est.n_bands), int(est.n_peaks)

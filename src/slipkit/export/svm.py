@@ -2,7 +2,7 @@
 
 skl2onnx writes an SVC as one ``ai.onnx.ml.SVMClassifier`` node, which
 onnxruntime evaluates one support vector at a time (~140 us for 1128 SVs x 254
-features against ~23 us for numpy matrix products; issue 6). This exporter
+features against ~23 us for numpy matrix products). This exporter
 writes the same function with plain ops that map to BLAS calls.
 
 RBF kernel, with ``z = sqrt(gamma) (x - shift) / scale`` (the scaler, if any, and

@@ -1,4 +1,4 @@
-"""Exporters for the pin-count-independent TacTip estimators (issue 14).
+"""Exporters for the pin-count-independent TacTip estimators.
 
 * :class:`~slipkit.baselines.tactip.PinMotionDetector` as a
   :class:`~slipkit.export.detectors.DetectorGraph`: a window of the last ``W = span +

@@ -32,7 +32,7 @@ import io
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import onnx
@@ -242,13 +242,13 @@ def fold_standardisation(parts: TorchParts) -> TorchParts:
     folded = copy.deepcopy(module)
     with torch.no_grad():
         if fold_in:
-            lin = folded[0]
+            lin = cast(torch.nn.Linear, folded[0])
             w = lin.weight.detach().double().numpy() / np.asarray(parts.x_scale)
             b = lin.bias.detach().double().numpy() - w @ np.asarray(parts.x_mean)
             lin.weight.copy_(torch.as_tensor(w, dtype=lin.weight.dtype))
             lin.bias.copy_(torch.as_tensor(b, dtype=lin.bias.dtype))
         if fold_out:
-            lin = folded[len(folded) - 1]
+            lin = cast(torch.nn.Linear, folded[len(folded) - 1])
             ys = np.asarray(parts.y_scale, dtype=np.float64)
             w = lin.weight.detach().double().numpy() * ys[:, None]
             b = lin.bias.detach().double().numpy() * ys + np.asarray(parts.y_mean)

@@ -1,4 +1,4 @@
-"""A learned DAVIS slip classifier on event-frame features (issue 14).
+"""A learned DAVIS slip classifier on event-frame features.
 
 Rigi et al.'s rule (:class:`slipkit.baselines.davis.DavisPolarity`) cleans each event
 frame morphologically and calls slip when the positive (contact lost) area dominates.

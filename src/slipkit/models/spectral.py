@@ -1,4 +1,4 @@
-"""A learned SlipTack speed regressor on spectral features of the nib signal (issue 14).
+"""A learned SlipTack speed regressor on spectral features of the nib signal.
 
 The analytic estimator (:class:`slipkit.baselines.sliptack.StickSlipSpeed`) finds the
 dominant stick-slip frequency of a window and inverts eq. 3 of the paper.

@@ -73,6 +73,7 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from slipkit._registry import Registry
 from slipkit.runtime._schema import MAX_FRAMES, MAX_STEPS, MAX_VALUES, Fields
 
 Array = NDArray[np.float64]
@@ -114,7 +115,9 @@ class Op(Protocol):
 #: op name -> builder ``(params, input shape) -> Op``. Builders check their parameters
 #: against the input shape and raise :class:`~slipkit.runtime.errors.BundleError`
 #: naming the field.
-OPS: dict[str, Callable[[Fields, tuple[int, ...]], Op]] = {}
+OPS: Registry[str, Callable[[Fields, tuple[int, ...]], Op]] = Registry(
+    "preprocessing op", error=ValueError, n_args=2, key_type=str
+)
 
 
 def register_op(
@@ -127,10 +130,7 @@ def register_op(
     def deco(
         builder: Callable[[Fields, tuple[int, ...]], Op],
     ) -> Callable[[Fields, tuple[int, ...]], Op]:
-        if name in OPS:
-            raise ValueError(f"preprocessing op {name!r} is already registered")
-        OPS[name] = builder
-        return builder
+        return OPS.register(name, builder)
 
     return deco
 

@@ -32,6 +32,7 @@ from typing import Any, Literal, Protocol
 import numpy as np
 import pandas as pd
 
+from slipkit._registry import Registry
 from slipkit.data.dataset import Dataset, LabelSpec, StreamSpec, Trial
 from slipkit.errors import SlipkitError
 
@@ -91,7 +92,9 @@ class SceneState:
 
 
 Effect = Callable[..., SceneState]
-EFFECTS: dict[str, Effect] = {}
+EFFECTS: Registry[str, Effect] = Registry(
+    "effect", error=ValueError, n_args=2, key_type=str
+)
 Draw = Literal["uniform", "log", "choice"]
 #: effect name -> {parameter: how a ``[lo, hi]`` (or list) value is drawn per trial}
 EFFECT_DRAWS: dict[str, dict[str, Draw]] = {}
@@ -120,11 +123,7 @@ def register_effect(
         )
 
     def deco(fn: Effect) -> Effect:
-        if name in EFFECTS and EFFECTS[name] is not fn:
-            raise ValueError(
-                f"effect {name!r} is already registered by {EFFECTS[name].__module__}"
-            )
-        EFFECTS[name] = fn
+        EFFECTS.register(name, fn)
         EFFECT_DRAWS[name] = spec
         return fn
 

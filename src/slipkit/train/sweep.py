@@ -20,7 +20,7 @@ A multirun over replicates (seeds, objects, folds: the ``replicates`` of the cal
 ``aggregate.csv`` in the sweep folder (:func:`aggregate_sweep`): one row per estimator
 and setting of the other swept parameters, with the number of runs and the mean, std
 and Student-t confidence interval of the objective and of every numeric validation and
-test metric (:func:`slipkit.compare.aggregate.aggregate`). The best run is still chosen
+test metric (:func:`slipkit.evaluate.aggregate.aggregate`). The best run is still chosen
 on the validation objective alone.
 
 Any Hydra launcher runs the jobs: the basic one in sequence, ``hydra/launcher=joblib``
@@ -224,7 +224,7 @@ def aggregate_sweep(
         units. Written to
         ``aggregate.csv`` atomically. None when no job recorded itself.
     """
-    from slipkit.compare.aggregate import aggregate  # pandas / scipy: train extra
+    from slipkit.evaluate.aggregate import aggregate  # pandas / scipy: train extra
 
     jobs = [
         json.loads(p.read_text(encoding="utf-8"))

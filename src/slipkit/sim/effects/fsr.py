@@ -281,7 +281,7 @@ def fsr_impulse_disturbance(
     positive), and ``count`` (whole numbers ``[lo, hi]``) knocks fall in the hold phase,
     at least ``margin_s`` from its ends; every range is drawn per knock. Its slope,
     up to ``pi A / (2 r)``, reaches a slip event's; ``disturbance = 1`` marks it.
-    Observation (the independent generator of issue 14): +-15-50 % of the holding
+    Observation (an independent signal generator): +-15-50 % of the holding
     force, millisecond rise, 5-50 ms long, where ``fsr_disturbance`` gives the paper's
     gentle 2-6 %, 60-150 ms bumps. The shape is an assumption.
     """

@@ -148,8 +148,8 @@ def nib_harmonics(
     adds ``ratio a_n sin(2 phi + phase)`` (mm), with ``a_n = (2 / pi) D_n`` the
     fundamental amplitude of an ideal sawtooth of the cycle's peak-to-peak ``2 D_n``
     (``D_n = break_u - centre_u``). Evaluated at the stream's timestamps, so a slow
-    stream aliases it like the fundamental. Observation (the independent generator of
-    issue 14): a second harmonic of 0.63 of the fundamental; the nib's read-out and a
+    stream aliases it like the fundamental. Observation (an independent signal
+    generator): a second harmonic of 0.63 of the fundamental; the nib's read-out and a
     non-ideal release shape it, which the piecewise model leaves out. ``ratio`` is
     relative to ``a_n``; the measured ratio also carries the waveform's own harmonic
     (0.5 for an ideal sawtooth), at a phase set by ``phase_deg``.

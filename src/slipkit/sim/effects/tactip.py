@@ -178,7 +178,7 @@ def missing_pin_frames(
     ``k`` pins (NaN), ``k`` uniform on the integers of ``count`` = ``[lo, hi]``, the
     pins chosen uniformly without replacement.
 
-    Observation (the independent generator of issue 14): 1-5 NaN pins in ~3 % of
+    Observation (an independent signal generator): 1-5 NaN pins in ~3 % of
     frames, i.e. misses come in bursts within a frame (a glare patch, a blurred frame)
     rather than independently per pin as in ``missing_pins``. Assumption: affected
     frames are independent of each other and of the motion.
@@ -233,7 +233,7 @@ def mindlin_creep(
     ``A ρ(t) h_i(t) w_i(t)``, ``h = clip((q^2 - c^2) / (1 - c^2), 0, 1)`` (0 in the
     stick zone, 1 at and beyond the edge), ``w`` the contact weight; frozen at its
     onset value (``ρ = 1``, ``c = 0``) afterwards. ``A = amplitude_mm`` (mm) is the
-    creep of an edge pin at onset. Observation: the independent generator of issue 14
+    creep of an edge pin at onset. Observation: an independent signal generator
     shows such a creep before onset; the profile ``h`` is an assumption (Johnson's
     annulus slip grows from 0 at ``c`` to its largest at ``a``).
     """

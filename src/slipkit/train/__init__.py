@@ -1,0 +1,1 @@
+"""Training: the train / evaluate / search commands, tasks and run folders."""

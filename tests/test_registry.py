@@ -1,0 +1,88 @@
+"""The one registry type: duplicates refused, signatures checked, MRO lookup, and every
+plug-in table of slipkit built on it."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from slipkit._registry import Registry
+
+
+def _two(a: Any, b: Any) -> None:
+    return None
+
+
+def _one(a: Any) -> None:
+    return None
+
+
+def test_a_second_entry_under_a_key_is_refused_with_the_registrys_error() -> None:
+    """Registering another object under a taken key raises the registry's own error type."""
+    reg: Registry[str, Any] = Registry("widget", error=KeyError, n_args=2)
+    reg.register("a", _two)
+    with pytest.raises(KeyError, match="widget is already registered for 'a'"):
+        reg.register("a", lambda x, y: None)
+    assert _two is reg["a"]
+
+
+def test_the_same_object_twice_is_one_entry_and_overwrite_replaces() -> None:
+    """Re-registering the identical object is a no-op; overwrite=True replaces the entry."""
+    reg: Registry[str, Any] = Registry("widget", n_args=2)
+    reg.register("a", _two)
+    reg.register("a", _two)
+    other = lambda x, y: None  # noqa: E731
+    reg.register("a", other, overwrite=True)
+    assert (1, other) == (len(reg), reg["a"])
+
+
+def test_a_wrong_signature_or_key_type_is_refused_where_it_is_registered() -> None:
+    """An entry that cannot take the kind's positional arguments, or a key of the wrong type,
+    fails at registration, naming the key."""
+    reg: Registry[Any, Any] = Registry("exporter", n_args=2, key_type=type)
+    with pytest.raises(TypeError, match=r"must accept 2 positional"):
+        reg.register(int, _one)
+    with pytest.raises(TypeError, match="key must be a type"):
+        reg.register("int", _two)
+    with pytest.raises(TypeError, match="not callable"):
+        reg.register(int, 3)
+    assert 0 == len(reg)
+
+
+def test_for_class_walks_the_mro() -> None:
+    """A subclass without its own entry gets its nearest base's; an unrelated class None."""
+
+    class Base:
+        pass
+
+    class Child(Base):
+        pass
+
+    reg: Registry[type, Any] = Registry("deployer", key_type=type)
+    reg.register(Base, "base entry")
+    assert ("base entry", None) == (reg.for_class(Child), reg.for_class(int))
+
+
+def test_every_plug_in_table_is_a_registry_that_refuses_duplicates() -> None:
+    """Exporters, deployers, comparison adapters, effects, scenarios and runtime ops share
+    the one registry type; a different adapter for a registered task class is refused."""
+    from slipkit.closedloop.scenarios import SCENARIOS
+    from slipkit.compare import adapters
+    from slipkit.errors import SlipkitError
+    from slipkit.export import deploy, registry
+    from slipkit.runtime.preprocessing import OPS
+    from slipkit.sim.core import EFFECTS
+    from slipkit.train.tasks.force import ForceRegression
+
+    tables = [
+        registry._EXPORTERS,
+        deploy._DEPLOYERS,
+        adapters._ADAPTERS,
+        EFFECTS,
+        SCENARIOS,
+        OPS,
+    ]
+    assert [True] * 6 == [isinstance(t, Registry) for t in tables]
+    with pytest.raises(SlipkitError, match="already registered"):
+        adapters.register_adapter(ForceRegression, lambda view: None)
