@@ -39,6 +39,10 @@ def small(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
             "~closedloop.detectors.energy_k3",
             "~closedloop.detectors.speed_10",
             "~closedloop.runs.speed",
+            "~closedloop.detectors.onset",
+            "~closedloop.detectors.onset_logistic",
+            "~closedloop.runs.onset",
+            "~closedloop.runs.onset_logistic",
         ],
     )
     yield folder
@@ -129,4 +133,34 @@ def test_default_scenario_keeps_the_order_and_exports_the_threshold(
         bool(slide["oracle"] <= slide["energy_k1"]),
         bool(slide["energy_k1"] <= slide["none"]),
         float(manifest["threshold"]),
+    )
+
+
+def test_onset_bundle_beats_the_25ms_oracle_without_false_alarms(
+    tmp_path: Path,
+) -> None:
+    """The nib-rate onset bundle (seed 0, 2 trials per condition) raises no false
+    alarm, catches every object and declares sooner than the oracle lagging 25 ms."""
+    folder = tmp_path / "cl"
+    _run(
+        folder,
+        [
+            "seeds=[0]",
+            "trials_per_speed=2",
+            "~closedloop.detectors.energy_k1",
+            "~closedloop.detectors.energy_k3",
+            "~closedloop.detectors.speed_10",
+            "~closedloop.detectors.onset_logistic",
+            "~closedloop.runs.speed",
+            "~closedloop.runs.energy",
+            "~closedloop.runs.onset_logistic",
+            "closedloop.oracle_delays_ms=[25]",
+        ],
+    )
+    summary = pd.read_csv(folder / "summary.csv").set_index("detector")
+    row = summary.loc["onset"]
+    assert (0.0, 100.0, True) == (
+        float(row["false_alarm_pct"]),
+        float(row["caught_pct"]),
+        bool(row["delay_ms"] < summary.loc["oracle+25ms", "delay_ms"]),
     )

@@ -181,6 +181,8 @@ def test_sliptack_spectral_regressor_beside_the_analytic_inversion(
             "comparison.dataset.n_trials=6",
             "~comparison.estimators.paper_form",
             "~comparison.estimators.calibrated",
+            "~comparison.estimators.onset",
+            "~comparison.estimators.onset_logistic",
         ],
     )
     kinds = dict(zip(df["estimator"], df["kind"], strict=True))
@@ -188,6 +190,28 @@ def test_sliptack_spectral_regressor_beside_the_analytic_inversion(
     exports = dict(zip(df["estimator"], df["export"], strict=True))
     assert "ok" == exports["spectral_gbr"]  # exports since issue 14's exporter
     assert True == bool(np.isfinite(df["rmse"]).all())  # noqa: E712
+
+
+@pytest.mark.slow  # ~25 s: the exact inversion's 1 s spectra on every pull
+def test_sliptack_onset_detectors_share_the_speed_split(tmp_path: Path) -> None:
+    """SlipTack (hard pull): the onset detectors run on the speed estimators' split
+    (the run checks it) and catch every test slip without an early alarm."""
+    df = _run(
+        tmp_path,
+        "sliptack",
+        [
+            "~comparison.estimators.paper_form",
+            "~comparison.estimators.calibrated",
+            "~comparison.estimators.spectral_gbr",
+            "~comparison.estimators.onset_logistic",
+        ],
+    )
+    row = df.set_index("estimator").loc["onset"]
+    assert (1.0, 0.0, "ok") == (
+        float(row["detected_rate"]),
+        float(row["early_alarm_rate"]),
+        row["export"],
+    )
 
 
 def _compose_comparison(family: str, overrides: list[str] | None = None):

@@ -327,3 +327,14 @@ def test_export_deploys_the_runs_chosen_debounce(tmp_path: Path) -> None:
     main(["export", f"run={run}", f"out={tmp_path / 'bundle'}", "choose_session=false"])
     manifest = json.loads((tmp_path / "bundle" / "manifest.json").read_text())
     assert {"k": 3} == manifest["debounce"]
+
+
+def test_stratify_gives_the_sliptack_speed_split() -> None:
+    """stratify=object splits by trial keeping each object's share, the same trials as
+    the SlipTack speed task's split of the data (so a comparison can hold both)."""
+    from slipkit.data.splits import split_by_trial
+
+    ds = _slip_dataset()
+    split, by = _detection(stratify="object").split_of(ds, 3)
+    expected = split_by_trial(ds, test_size=0.5, seed=3, stratify="object")
+    assert (expected.test, "trial") == (split.test, by)

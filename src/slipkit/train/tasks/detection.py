@@ -265,6 +265,10 @@ class StreamDetection(Task):
     group : str or None
         The trials column naming a trial's group (e.g. ``object``) for ``split`` and
         for the validation folds; None: ``object`` when the dataset has it.
+    stratify : str or None
+        A by-trial split keeps the shares of this trials column (e.g. ``material``)
+        when every value has two trials or more, else splits plainly (as the SlipTack
+        speed task, so a comparison's detectors share its split); None: plainly.
     operating_point : mapping or None
         How the deployed (threshold, debounce) is chosen on validation trials:
         ``debounce`` (candidate k), ``thresholds`` (quantiles of the out-of-fold
@@ -310,6 +314,7 @@ class StreamDetection(Task):
         test_size: float = 0.5,
         split: str = "trial",
         group: str | None = None,
+        stratify: str | None = None,
         operating_point: Mapping[str, Any] | None = None,
         name: str = "detector",
         unit: str = "",
@@ -345,6 +350,7 @@ class StreamDetection(Task):
         self.test_size = float(test_size)
         self.split = split
         self.group = group
+        self.stratify = stratify
         self.operating_point = parse_operating_point(operating_point)
         self.name = name
         self.unit = unit
@@ -743,6 +749,17 @@ class StreamDetection(Task):
                 dataset, col, test_size=self.test_size, val_size=0.0, seed=seed
             )
             return split, col
+        if self.stratify is not None:
+            try:
+                split = split_by_trial(
+                    dataset,
+                    test_size=self.test_size,
+                    seed=seed,
+                    stratify=self.stratify,
+                )
+                return split, "trial"
+            except (ValueError, KeyError):
+                pass  # too few trials of a value (or no such column): a plain split
         split = split_by_trial(
             dataset, test_size=self.test_size, val_size=0.0, seed=seed
         )
