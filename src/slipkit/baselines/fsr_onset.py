@@ -495,6 +495,9 @@ class FSROnsetLogistic(FSROnset):
         As :class:`FSROnset`.
     """
 
+    #: shown as a learned estimator in comparisons (it fits a logistic regression)
+    slipkit_kind = "learned"
+
     _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
         **{
             k: v

@@ -220,6 +220,9 @@ class SlipTackOnsetLogistic(SlipTackOnset):
         Its intercept.
     """
 
+    #: shown as a learned estimator in comparisons (it fits a logistic regression)
+    slipkit_kind = "learned"
+
     _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
         **SlipTackOnset._parameter_constraints,
         "window": [Interval(Integral, 8, None, closed="left")],

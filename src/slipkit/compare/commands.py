@@ -95,9 +95,22 @@ class Comparison:
 
 
 def _is_analytic(name: str, node: dict[str, Any], analytic: list[str]) -> bool:
+    """Whether the estimator trains as a detector (``detector:`` slot of the train config)."""
     return name in analytic or str(node.get("_target_", "")).startswith(
         "slipkit.baselines."
     )
+
+
+def _kind(node: dict[str, Any], analytic: bool) -> str:
+    """The row's kind: a class's own ``slipkit_kind`` tag (a detector that fits a model, such
+    as a logistic regression on onset features, says ``"learned"``), else by its slot."""
+    try:
+        tag = getattr(get_class(str(node.get("_target_", ""))), "slipkit_kind", None)
+    except Exception:  # the class was checked before training; no tag then
+        tag = None
+    if tag in ("analytic", "learned"):
+        return str(tag)
+    return "analytic" if analytic else "learned"
 
 
 def _train_config(
@@ -233,7 +246,7 @@ def _run_one(
         cost = DeployCost(False, "not measured (cost.export=false)")
     row = {
         "estimator": est,
-        "kind": "analytic" if kind_analytic else "learned",
+        "kind": _kind(node, kind_analytic),
         "class": str(node["_target_"]).rsplit(".", 1)[-1],
         **ev.row,
         "fit_s": timer.total_s,
