@@ -13,13 +13,13 @@ from hypothesis import strategies as st
 
 from slipkit import config_dir
 from slipkit.baselines.sliptack import (
-    DropAcceleration,
     StickSlipSpeed,
-    TorsionalSlipDetector,
     dominant_frequency,
     f_max_values,
     speed_from_frequency,
 )
+from slipkit.baselines.sliptack_accel import DropAcceleration
+from slipkit.baselines.sliptack_torsion import TorsionalSlipDetector
 from slipkit.data import Dataset
 from slipkit.errors import SlipkitError
 from slipkit.physics.stick_slip import (

@@ -17,7 +17,7 @@ from scipy.signal import butter, sosfilt, sosfilt_zi
 from slipkit import config_dir
 from slipkit.baselines.biotac import ForceDerivative, PressureVibration
 from slipkit.baselines.fsr import FSRTouchSlip
-from slipkit.baselines.sliptack import TorsionalSlipDetector
+from slipkit.baselines.sliptack_torsion import TorsionalSlipDetector
 from slipkit.data import Dataset
 from slipkit.export import ExportError, exporter_for
 from slipkit.export.detectors import (

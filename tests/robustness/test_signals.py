@@ -15,13 +15,9 @@ from hypothesis.extra.numpy import arrays
 from slipkit.baselines.biotac import ForceDerivative, PressureVibration
 from slipkit.baselines.davis import DavisPolarity
 from slipkit.baselines.fsr import FSRTouchSlip
-from slipkit.baselines.sliptack import (
-    PAPER_F_MAX,
-    DropAcceleration,
-    StickSlipSpeed,
-    TorsionalSlipDetector,
-    dominant_frequency,
-)
+from slipkit.baselines.sliptack import PAPER_F_MAX, StickSlipSpeed, dominant_frequency
+from slipkit.baselines.sliptack_accel import DropAcceleration
+from slipkit.baselines.sliptack_torsion import TorsionalSlipDetector
 from slipkit.errors import SlipkitError
 
 RATE = 1000.0

@@ -274,7 +274,8 @@ def _task_needs(task: Any) -> tuple[tuple[type, ...], tuple[type, ...], str] | N
 
     from slipkit.baselines.base import StreamDetector
     from slipkit.baselines.davis import DavisPolarity
-    from slipkit.baselines.sliptack import DropAcceleration, StickSlipSpeed
+    from slipkit.baselines.sliptack import StickSlipSpeed
+    from slipkit.baselines.sliptack_accel import DropAcceleration
     from slipkit.models.events import EventFrameClassifier
     from slipkit.models.spectral import SpectralSpeedRegressor
     from slipkit.train.tasks.davis import DavisRelease

@@ -39,7 +39,7 @@ return a float64 score: no cast nodes, no float32 rounding.
   MatMul over ``W = L + window - 1`` samples (:func:`steady_state_fir`), rectify,
   ``TopK`` for the ``n_exceed``-th largest of the last ``window`` outputs, over a
   **fixed baseline** (the detector's ``baseline`` option).
-* :class:`~slipkit.baselines.sliptack.TorsionalSlipDetector` -- the band-pass as in
+* :class:`~slipkit.baselines.sliptack_torsion.TorsionalSlipDetector` -- the band-pass as in
   the pressure graph, then the RMS of the last ``window`` outputs.
 
 Windowed IIR filters (:func:`steady_state_fir`): the graph filters its window with
@@ -84,7 +84,7 @@ from numpy.typing import NDArray
 from slipkit.baselines.base import StreamDetector
 from slipkit.baselines.biotac import ForceDerivative, PressureVibration
 from slipkit.baselines.fsr import FSRTouchSlip
-from slipkit.baselines.sliptack import TorsionalSlipDetector
+from slipkit.baselines.sliptack_torsion import TorsionalSlipDetector
 from slipkit.export.biotac_detectors import (  # noqa: F401
     _band_matrix,
     _reduce_min,

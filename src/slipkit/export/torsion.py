@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from sklearn.utils.validation import check_is_fitted
 
-from slipkit.baselines.sliptack import TorsionalSlipDetector
+from slipkit.baselines.sliptack_torsion import TorsionalSlipDetector
 from slipkit.export._graph import GraphBuilder
 from slipkit.export.biotac_detectors import _band_matrix
 from slipkit.export.detector_graph import (

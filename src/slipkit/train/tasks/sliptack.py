@@ -383,7 +383,7 @@ class SlipTackAccel(Task):
     Parameters
     ----------
     features : list of str
-        Features of :class:`~slipkit.baselines.sliptack.DropAcceleration` to compare
+        Features of :class:`~slipkit.baselines.sliptack_accel.DropAcceleration` to compare
         (each a clone of the configured estimator with ``feature`` set).
     test_size : float
         Fraction of trials held out.
