@@ -25,6 +25,17 @@ MOVED = [
         "TorsionalSlipDetector",
         "slipkit.baselines.sliptack_torsion",
     ),
+    (
+        "slipkit.export.sliptack",
+        "SpeedSlipDetector",
+        "slipkit.export.sliptack_detector",
+    ),
+    (
+        "slipkit.export.sliptack",
+        "export_speed_slip_detector",
+        "slipkit.export.sliptack_detector",
+    ),
+    ("slipkit.export.sliptack", "main", "slipkit.export.sliptack_parity"),
 ]
 
 

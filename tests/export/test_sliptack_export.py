@@ -21,12 +21,14 @@ from slipkit.export.detectors import NO_SCORE, DetectorGraph, detector_windows
 from slipkit.export.parity import onnx_session
 from slipkit.export.registry import exporter_for
 from slipkit.export.sliptack import (
-    SpeedSlipDetector,
     dft_matrices,
-    export_speed_slip_detector,
     export_stick_slip_speed,
     graph_speeds,
     peak_ranks,
+)
+from slipkit.export.sliptack_detector import (
+    SpeedSlipDetector,
+    export_speed_slip_detector,
 )
 
 RATE = 1000.0

@@ -16,11 +16,10 @@ from slipkit.baselines.sliptack import StickSlipSpeed
 from slipkit.export.detectors import NO_SCORE, check_detector_parity
 from slipkit.export.parity import onnx_session
 from slipkit.export.registry import ExportError
-from slipkit.export.sliptack import (
+from slipkit.export.sliptack import export_stick_slip_speed, graph_speeds
+from slipkit.export.sliptack_detector import (
     SpeedSlipDetector,
     export_speed_slip_detector,
-    export_stick_slip_speed,
-    graph_speeds,
 )
 from slipkit.runtime import BundleError, StreamLoop, load_bundle, write_bundle
 from slipkit.runtime.bundle import PREPARE_FILE, Budget, sign_manifest

@@ -1045,15 +1045,12 @@ def _deploy_sliptack_speed(
     estimation instants). The run saves one estimator per training material plus
     ``"*"`` (all training trials, the configured friction); a gripper does not know
     the material, so ``"*"`` is deployed. A speed has no slip class: the decision is
-    :class:`slipkit.export.sliptack.SpeedSlipDetector`'s ``speed >= threshold`` with
+    :class:`slipkit.export.sliptack_detector.SpeedSlipDetector`'s ``speed >= threshold`` with
     the threshold from the export config's ``regression.threshold`` (mm/s; 0: slip
     whenever a stick-slip frequency is found), class ``"1"``.
     """
-    from slipkit.export.sliptack import (
-        SpeedSlipDetector,
-        incremental_problem,
-        sliding_spectrum_step,
-    )
+    from slipkit.export.sliptack import incremental_problem, sliding_spectrum_step
+    from slipkit.export.sliptack_detector import SpeedSlipDetector
     from slipkit.train.tasks.sliptack import DEFAULT, SlipTackSpeed, _split
 
     assert isinstance(task, SlipTackSpeed)

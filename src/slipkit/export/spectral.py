@@ -70,7 +70,6 @@ from slipkit.export.registry import (
     register_exporter,
 )
 from slipkit.export.sliptack import (
-    SpeedSlipDetector,
     _factor,
     _frequency,
     _peak_frequency,
@@ -78,6 +77,7 @@ from slipkit.export.sliptack import (
     _slice,
     dft_matrices,
 )
+from slipkit.export.sliptack_detector import SpeedSlipDetector
 from slipkit.models.spectral import SpectralSpeedRegressor
 
 FloatArray = NDArray[np.float64]
@@ -519,7 +519,7 @@ def export_spectral_speed(
 class SpectralSlipDetector(SpeedSlipDetector):
     """Slip where the learned SlipTack speed reaches a threshold (mm/s).
 
-    :class:`~slipkit.export.sliptack.SpeedSlipDetector` around a fitted
+    :class:`~slipkit.export.sliptack_detector.SpeedSlipDetector` around a fitted
     :class:`SpectralSpeedRegressor` (same rule: ``decision_function`` is the speed,
     ``-inf`` before the first window; slip where ``>= threshold``); its own class so
     that the exporter registry gives it the spectral graph.
