@@ -36,6 +36,11 @@ MOVED = [
         "slipkit.export.sliptack_detector",
     ),
     ("slipkit.export.sliptack", "main", "slipkit.export.sliptack_parity"),
+    (
+        "slipkit.train.tasks.force",
+        "FingerDirection",
+        "slipkit.train.tasks.force_direction",
+    ),
 ]
 
 

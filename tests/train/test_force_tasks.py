@@ -22,9 +22,9 @@ from slipkit.models.force import LocalLinearRegressor, WeightedNormalsRegressor
 from slipkit.physics.biotac import linear_drive_matrix
 from slipkit.sim.commands import build_scene
 from slipkit.train.commands import evaluate_main, train_main
-from slipkit.train.tasks.force import (
+from slipkit.train.tasks.force import ForceRegression
+from slipkit.train.tasks.force_direction import (
     FingerDirection,
-    ForceRegression,
     angle_errors_deg,
     contiguous_block_split,
 )

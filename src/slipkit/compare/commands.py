@@ -280,7 +280,8 @@ def _task_needs(task: Any) -> tuple[tuple[type, ...], tuple[type, ...], str] | N
     from slipkit.models.spectral import SpectralSpeedRegressor
     from slipkit.train.tasks.davis import DavisRelease
     from slipkit.train.tasks.detection import StreamDetection
-    from slipkit.train.tasks.force import FingerDirection, ForceRegression
+    from slipkit.train.tasks.force import ForceRegression
+    from slipkit.train.tasks.force_direction import FingerDirection
     from slipkit.train.tasks.slip_type import WindowClassification
     from slipkit.train.tasks.sliptack import SlipTackAccel, SlipTackSpeed
     from slipkit.train.tasks.tactip import TacTipFrames
