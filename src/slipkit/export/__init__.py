@@ -16,6 +16,9 @@ the gripper-PC runtime only loads the resulting ``.onnx`` files.
 
 from __future__ import annotations
 
+import importlib as _importlib
+
+import slipkit.families as _families
 from slipkit.export import detectors as _detectors  # noqa: F401  (registers exporters)
 from slipkit.export import events as _events  # noqa: F401
 from slipkit.export import force as _force  # noqa: F401
@@ -49,6 +52,12 @@ from slipkit.export.torch import (
     export_torch_module,
     find_torch_parts,
 )
+
+# Every family's exporter modules (slipkit.families: the one table of a family's parts) and
+# family folders' plug-ins; the modules imported above are imported once, not again.
+for _module in sorted({e for f in _families.FAMILIES.values() for e in f.exporters}):
+    _importlib.import_module(_module)
+_families.load_plugins("exporters")
 
 __all__ = [
     "ExportError",

@@ -1,0 +1,74 @@
+"""Every sensor family's record (slipkit.families) is complete: what it lists exists and is
+registered where the stages look for it."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from slipkit.families import FAMILIES, Family, resolve
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module", params=sorted(FAMILIES))
+def family(request: pytest.FixtureRequest) -> Family:
+    return FAMILIES[request.param]
+
+
+def test_tasks_have_the_adapters_and_deployers_the_record_claims(
+    family: Family,
+) -> None:
+    """Each listed task resolves; each task it deploys has a deployer, each task it compares
+    an adapter (looked up as slipkit export and slipkit compare do)."""
+    from slipkit.compare.adapters import _ADAPTERS
+    from slipkit.export.deploy import _DEPLOYERS
+    from slipkit.train.task import Task
+
+    classes = {ref: resolve(ref) for ref in family.tasks}
+    assert all(issubclass(c, Task) for c in classes.values())
+    missing_deployers = [
+        r for r in family.deploys if _DEPLOYERS.for_class(classes[r]) is None
+    ]
+    missing_adapters = [
+        r for r in family.compares if _ADAPTERS.for_class(classes[r]) is None
+    ]
+    unlisted = [r for r in (*family.deploys, *family.compares) if r not in classes]
+    assert ([], [], []) == (missing_deployers, missing_adapters, unlisted)
+
+
+def test_exporter_modules_register_exporters(family: Family) -> None:
+    """Each exporter module registers at least one exporter defined in it."""
+    import slipkit.export  # noqa: F401  (imports and registers every exporter)
+    from slipkit.export.registry import registered
+
+    owners = {fn.__module__ for fn in registered().values()}
+    assert [] == [m for m in family.exporters if resolve(m).__name__ not in owners]
+
+
+def test_scenes_scenario_configs_and_docs_exist(family: Family) -> None:
+    """Scene, comparison, closed-loop and deploy configs and doc pages exist; the scenario
+    is registered under the family's scenario name."""
+    from slipkit.closedloop.scenarios import get_scenario
+
+    files = [
+        *(f"configs/scene/{s}.yaml" for s in family.scenes),
+        *(f"configs/comparison/{c}.yaml" for c in family.comparisons),
+        f"configs/deploy/{family.sensor}.yaml",
+        *(f"docs/{d}" for d in family.docs),
+    ]
+    if family.scenario is not None:
+        files.append(f"configs/closedloop/{family.scenario}.yaml")
+        assert get_scenario(family.scenario) is not None
+    assert [] == [f for f in files if not (ROOT / f).is_file()]
+
+
+def test_every_comparison_and_scenario_belongs_to_a_family() -> None:
+    """No comparison or closed-loop config is left out of the records (own_sensor is the
+    family-free comparison for a lab's own sensor)."""
+    listed = {c for f in FAMILIES.values() for c in f.comparisons} | {"own_sensor"}
+    scenarios = {f.scenario for f in FAMILIES.values()}
+    comparisons = {p.stem for p in (ROOT / "configs/comparison").glob("*.yaml")}
+    closedloop = {p.stem for p in (ROOT / "configs/closedloop").glob("*.yaml")}
+    assert (set(), set()) == (comparisons - listed, closedloop - scenarios)
