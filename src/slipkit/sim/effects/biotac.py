@@ -22,6 +22,7 @@ from slipkit.physics.biotac import (
     neighbour_kernel,
     proximity_weights,
 )
+from slipkit.sim import params
 from slipkit.sim.core import SceneState, SimulationError, register_effect
 
 
@@ -41,8 +42,7 @@ def _electrode_delta(
 
 def _positive(effect: str, **values: float) -> None:
     for key, value in values.items():
-        if not float(value) > 0.0:
-            raise SimulationError(f"effect {effect!r}: {key} must be > 0; got {value}")
+        params.number(f"effect {effect!r}: {key}", value, lo=0.0, strict_lo=True)
 
 
 def _press_values(

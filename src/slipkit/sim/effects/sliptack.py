@@ -16,14 +16,12 @@ from slipkit.physics.stick_slip import (
     cycles_quasi_static,
     natural_frequency,
 )
+from slipkit.sim import params
 from slipkit.sim.core import SceneState, SimulationError, register_effect
 
 
 def _positive(value: float, key: str, effect: str) -> float:
-    value = float(value)
-    if not np.isfinite(value) or value <= 0:
-        raise SimulationError(f"effect {effect!r}: {key} must be > 0; got {value}")
-    return value
+    return params.number(f"effect {effect!r}: {key}", value, lo=0.0, strict_lo=True)
 
 
 @register_effect("stick_slip")

@@ -31,6 +31,7 @@ from slipkit.physics.biotac import (
     tangent_frame,
     weighted_normals_scales,
 )
+from slipkit.sim import params
 from slipkit.sim.core import SceneState, SimulationError, phase_times, sample_times
 
 SENSOR = "biotac"
@@ -59,15 +60,7 @@ def smooth_step(u: np.ndarray) -> np.ndarray:
 def _scalar(
     key: str, value: Any, *, lo: float | None = None, strict: bool = True
 ) -> float:
-    try:
-        x = float(value)
-    except (TypeError, ValueError) as exc:
-        raise SimulationError(f"{key} must be a number; got {value!r}") from exc
-    if not np.isfinite(x):
-        raise SimulationError(f"{key} must be finite; got {value!r}")
-    if lo is not None and (x <= lo if strict else x < lo):
-        raise SimulationError(f"{key} must be {'>' if strict else '>='} {lo}; got {x}")
-    return x
+    return params.number(key, value, lo=lo, strict_lo=strict)
 
 
 def _range(
@@ -79,19 +72,7 @@ def _range(
     strict: bool = False,
 ) -> tuple[float, float]:
     """A ``[low, high]`` range (or one number, a fixed value) within ``[lo, hi]``."""
-    if isinstance(value, str) or not isinstance(value, Sequence):
-        a = b = _scalar(key, value)
-    elif len(value) == 2:
-        a, b = _scalar(key, value[0]), _scalar(key, value[1])
-    else:
-        raise SimulationError(f"{key} must be a number or [low, high]; got {value!r}")
-    if a > b:
-        raise SimulationError(f"{key} must have low <= high; got {value!r}")
-    if lo is not None and (a <= lo if strict else a < lo):
-        raise SimulationError(f"{key} must be {'>' if strict else '>='} {lo}; got {a}")
-    if hi is not None and b > hi:
-        raise SimulationError(f"{key} must be <= {hi}; got {b}")
-    return a, b
+    return params.value_range(key, value, lo=lo, hi=hi, strict_lo=strict)
 
 
 def _gain3(key: str, value: Any) -> tuple[float, float, float]:
@@ -107,7 +88,8 @@ def _gain3(key: str, value: Any) -> tuple[float, float, float]:
 def _draw(
     rng: np.random.Generator, r: tuple[float, float], size: int | None = None
 ) -> Any:
-    return rng.uniform(r[0], r[1], size=size)
+    # draws even a fixed range: the scene's random stream is laid out that way
+    return params.draw(rng, r, size=size, skip_fixed=False)
 
 
 def _frame(t: np.ndarray, **columns: np.ndarray) -> pd.DataFrame:

@@ -23,6 +23,7 @@ import numpy as np
 import pandas as pd
 
 from slipkit.data.dataset import LabelSpec, StreamSpec
+from slipkit.sim import params
 from slipkit.sim.core import SceneState, SimulationError, sample_times
 
 EVENT_CHANNELS = ("x", "y", "polarity")
@@ -33,29 +34,11 @@ TRUTH_UNITS = {"area_px": "px", "area_mm2": "mm^2"}
 
 def _range(key: str, value: Any) -> tuple[float, float]:
     """A config range: a number (fixed) or ``[lo, hi]``, both > 0; raises naming ``key``."""
-    if isinstance(value, int | float):
-        lo = hi = float(value)
-    elif isinstance(value, Sequence) and not isinstance(value, str) and len(value) == 2:
-        lo, hi = float(value[0]), float(value[1])
-    else:
-        raise SimulationError(
-            f"model.{key}: expected a number or [lo, hi]; got {value!r}"
-        )
-    if not (math.isfinite(lo) and math.isfinite(hi)) or not 0 < lo <= hi:
-        raise SimulationError(
-            f"model.{key}: expected finite 0 < lo <= hi; got {value!r}"
-        )
-    return lo, hi
+    return params.value_range(f"model.{key}", value, lo=0.0, strict_lo=True)
 
 
 def _positive(key: str, value: float, *, allow_zero: bool = False) -> float:
-    value = float(value)
-    ok = math.isfinite(value) and (value >= 0 if allow_zero else value > 0)
-    if not ok:
-        raise SimulationError(
-            f"model.{key}: must be a finite number {'>=' if allow_zero else '>'} 0; got {value!r}"
-        )
-    return value
+    return params.number(f"model.{key}", value, lo=0.0, strict_lo=not allow_zero)
 
 
 @dataclass(frozen=True)

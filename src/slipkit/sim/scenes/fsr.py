@@ -24,6 +24,7 @@ from slipkit.physics.fsr import (
     max_force,
     voltage_from_force,
 )
+from slipkit.sim import params
 from slipkit.sim.core import SceneState, SimulationError, phase_times, sample_times
 
 Range = tuple[float, float]
@@ -31,35 +32,15 @@ Range = tuple[float, float]
 
 def _range(value: Any, key: str, strict: bool = True) -> Range:
     """A positive config number or ``[low, high]`` range (``strict=False``: >= 0)."""
-    items = (
-        list(value)
-        if isinstance(value, Sequence) and not isinstance(value, str)
-        else [value]
-    )
-    if len(items) == 1:
-        items = items * 2
-    if len(items) != 2:
-        raise SimulationError(f"{key} must be a number or [low, high]; got {items}")
-    try:
-        a, b = (float(v) for v in items)
-    except (TypeError, ValueError):
-        raise SimulationError(f"{key} must hold numbers; got {items}") from None
-    if not (np.isfinite(a) and np.isfinite(b)) or b < a:
-        raise SimulationError(f"{key} must be finite with low <= high; got [{a}, {b}]")
-    if a < 0 or (strict and a == 0):
-        raise SimulationError(f"{key} must be {'>' if strict else '>='} 0; got {a}")
-    return (a, b)
+    return params.value_range(key, value, lo=0.0, strict_lo=strict)
 
 
 def _scalar(value: Any, key: str, strict: bool = True) -> float:
-    a, b = _range(value, key, strict)
-    if a != b:
-        raise SimulationError(f"{key} must be a single number; got [{a}, {b}]")
-    return a
+    return params.single(key, value, lo=0.0, strict_lo=strict)
 
 
 def _draw(rng: np.random.Generator, r: Range) -> float:
-    return r[0] if r[0] == r[1] else float(rng.uniform(r[0], r[1]))
+    return float(params.draw(rng, r))
 
 
 class FSRProbeSlide:

@@ -21,6 +21,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from slipkit.data.dataset import LabelSpec, StreamSpec
 from slipkit.physics.stick_slip import G_M_S2, ConstantSpeedMotion, FloatArray
+from slipkit.sim import params
 from slipkit.sim.core import SceneState, SimulationError, sample_times
 
 Range = tuple[float, float]
@@ -37,41 +38,20 @@ MATERIAL_KEYS: dict[str, float] = {
 
 
 def _number(value: Any, key: str) -> float:
-    try:
-        out = float(value)
-    except (TypeError, ValueError):
-        raise SimulationError(f"{key} must be a number; got {value!r}") from None
-    if not np.isfinite(out):
-        raise SimulationError(f"{key} must be finite; got {value!r}")
-    return out
+    return params.number(key, value)
 
 
 def _range(value: Any, key: str, lo: float = 0.0, strict: bool = True) -> Range:
     """A config number or ``[low, high]`` range, checked to lie above ``lo``."""
-    if isinstance(value, Sequence) and not isinstance(value, str):
-        if len(value) != 2:
-            raise SimulationError(
-                f"{key} must be a number or [low, high]; got {list(value)}"
-            )
-        a, b = (_number(v, key) for v in value)
-    else:
-        a = b = _number(value, key)
-    if b < a:
-        raise SimulationError(f"{key}: low {a} exceeds high {b}")
-    if a < lo or (strict and a == lo):
-        raise SimulationError(f"{key} must be {'>' if strict else '>='} {lo}; got {a}")
-    return (a, b)
+    return params.value_range(key, value, lo=lo, strict_lo=strict)
 
 
 def _scalar(value: Any, key: str, lo: float = 0.0, strict: bool = True) -> float:
-    a, b = _range(value, key, lo, strict)
-    if a != b:
-        raise SimulationError(f"{key} must be a single number; got [{a}, {b}]")
-    return a
+    return params.single(key, value, lo=lo, strict_lo=strict)
 
 
 def _draw(rng: np.random.Generator, r: Range) -> float:
-    return r[0] if r[0] == r[1] else float(rng.uniform(r[0], r[1]))
+    return float(params.draw(rng, r))
 
 
 def _materials(

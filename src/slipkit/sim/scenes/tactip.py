@@ -32,6 +32,7 @@ from slipkit.physics.tactip import (
     pin_layout,
     slip_indentation_mm,
 )
+from slipkit.sim import params
 from slipkit.sim.core import SceneState, SimulationError, sample_times
 
 G_M_S2 = 9.81  # gravitational acceleration, m/s^2
@@ -47,28 +48,13 @@ TRUTH_UNITS = {
 
 def _range(key: str, value: Any, *, positive: bool = True) -> tuple[float, float]:
     """A config range: a number (fixed) or ``[lo, hi]``; raises naming ``key``."""
-    if isinstance(value, int | float):
-        lo = hi = float(value)
-    elif isinstance(value, Sequence) and not isinstance(value, str) and len(value) == 2:
-        lo, hi = float(value[0]), float(value[1])
-    else:
-        raise SimulationError(
-            f"model.{key}: expected a number or [lo, hi]; got {value!r}"
-        )
-    if not (math.isfinite(lo) and math.isfinite(hi)) or lo > hi:
-        raise SimulationError(f"model.{key}: expected finite lo <= hi; got {value!r}")
-    if positive and lo <= 0:
-        raise SimulationError(f"model.{key}: must be > 0; got {value!r}")
-    return lo, hi
+    return params.value_range(
+        f"model.{key}", value, lo=0.0 if positive else None, strict_lo=True
+    )
 
 
 def _positive(key: str, value: float) -> float:
-    value = float(value)
-    if not (math.isfinite(value) and value > 0):
-        raise SimulationError(
-            f"model.{key}: must be a finite number > 0; got {value!r}"
-        )
-    return value
+    return params.number(f"model.{key}", value, lo=0.0, strict_lo=True)
 
 
 @dataclass(frozen=True)
