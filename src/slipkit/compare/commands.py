@@ -264,79 +264,10 @@ def _run_one(
 
 
 def _task_needs(task: Any) -> tuple[tuple[type, ...], tuple[type, ...], str] | None:
-    """What ``task`` can fit: (accepted estimator classes, refused base, what it feeds).
-
-    ``None`` for a task this table does not know (no class check). Analytic
-    detectors (``slipkit.baselines``) read a stream sample by sample inside their
-    own task; learned models get feature rows or windows from theirs.
-    """
-    from sklearn.base import ClassifierMixin, RegressorMixin
-
-    from slipkit.baselines.base import StreamDetector
-    from slipkit.baselines.davis import DavisPolarity
-    from slipkit.baselines.sliptack import StickSlipSpeed
-    from slipkit.baselines.sliptack_accel import DropAcceleration
-    from slipkit.models.events import EventFrameClassifier
-    from slipkit.models.spectral import SpectralSpeedRegressor
-    from slipkit.train.tasks.davis import DavisRelease
-    from slipkit.train.tasks.detection import StreamDetection
-    from slipkit.train.tasks.force import ForceRegression
-    from slipkit.train.tasks.force_direction import FingerDirection
-    from slipkit.train.tasks.slip_type import WindowClassification
-    from slipkit.train.tasks.sliptack import SlipTackAccel, SlipTackSpeed
-    from slipkit.train.tasks.tactip import TacTipFrames
-
-    analytic = (StreamDetector, DavisPolarity, StickSlipSpeed, DropAcceleration)
-    stream = getattr(task, "stream", "?")
-    table: list[tuple[type, tuple[type, ...], tuple[type, ...], str]] = [
-        (
-            StreamDetection,
-            (StreamDetector,),
-            (),
-            f"runs an analytic stream detector (StreamDetector) on stream {stream!r}",
-        ),
-        (
-            DavisRelease,
-            (DavisPolarity, EventFrameClassifier),
-            (),
-            "runs a DAVIS event-frame detector (the polarity rule or a learned one)",
-        ),
-        (
-            SlipTackSpeed,
-            (StickSlipSpeed, SpectralSpeedRegressor),
-            (),
-            "runs the SlipTack speed estimator (eq. 3 inverted) or a learned spectral one",
-        ),
-        (SlipTackAccel, (DropAcceleration,), (), "runs the SlipTack drop estimator"),
-        (
-            WindowClassification,
-            (ClassifierMixin,),
-            analytic,
-            f"fits a learned classifier on windows of stream {stream!r}",
-        ),
-        (
-            TacTipFrames,
-            (ClassifierMixin,),
-            analytic,
-            f"fits a learned classifier on pin features of stream {stream!r}",
-        ),
-        (
-            ForceRegression,
-            (RegressorMixin,),
-            analytic,
-            f"fits a learned regressor on frames of stream {stream!r}",
-        ),
-        (
-            FingerDirection,
-            (RegressorMixin,),
-            analytic,
-            f"fits a learned regressor on frames of stream {stream!r}",
-        ),
-    ]
-    for task_cls, accepted, refused, feeds in table:
-        if isinstance(task, task_cls):
-            return accepted, refused, feeds
-    return None
+    """What ``task`` can fit, as the task declares it (:meth:`Task.estimator_rule`):
+    (accepted estimator classes, refused classes, what it feeds); None: no class check."""
+    rule = getattr(task, "estimator_rule", None)
+    return rule() if callable(rule) else None
 
 
 def check_estimators(comp: dict[str, Any], cfg: DictConfig) -> None:

@@ -18,7 +18,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -70,6 +70,23 @@ class Task(ABC):
     objective: str = "accuracy"
     #: "maximize" or "minimize" (the sweeper's direction for :attr:`objective`)
     direction: str = "maximize"
+    #: the estimator classes the task fits: ``slipkit compare`` refuses any other before
+    #: anything trains (empty: no check)
+    accepts: ClassVar[tuple[type, ...]] = ()
+    #: classes refused even when accepted (an analytic detector is a classifier too)
+    refuses: ClassVar[tuple[type, ...]] = ()
+    #: what the task feeds its estimator, for that refusal (``{stream}``: the task's stream)
+    feeds: ClassVar[str] = ""
+
+    def estimator_rule(self) -> tuple[tuple[type, ...], tuple[type, ...], str] | None:
+        """(accepted classes, refused classes, what the task feeds), or None: no check."""
+        if not self.accepts:
+            return None
+        return (
+            self.accepts,
+            self.refuses,
+            self.feeds.format(stream=repr(getattr(self, "stream", "?"))),
+        )
 
     @abstractmethod
     def fit(self, model: Any, dataset: Dataset, *, seed: int, out: Path) -> TaskResult:
@@ -116,3 +133,14 @@ def jsonable(value: Any) -> Any:
     if isinstance(value, Path):
         return str(value)
     return value
+
+
+def analytic_estimators() -> tuple[type, ...]:
+    """The analytic estimators a learned-model task refuses (they read a stream inside
+    their own task): stream detectors, the DAVIS polarity rule, the SlipTack estimators."""
+    from slipkit.baselines.base import StreamDetector
+    from slipkit.baselines.davis import DavisPolarity
+    from slipkit.baselines.sliptack import StickSlipSpeed
+    from slipkit.baselines.sliptack_accel import DropAcceleration
+
+    return (StreamDetector, DavisPolarity, StickSlipSpeed, DropAcceleration)

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from slipkit.baselines.davis import DavisPolarity as _DavisPolarity
 from slipkit.baselines.davis import bin_scores, contact_end, prf
 from slipkit.data.dataset import Dataset, Trial
 from slipkit.data.splits import split_by_trial
@@ -35,6 +36,7 @@ from slipkit.evaluate.events import (
     events_table,
     slipped_of,
 )
+from slipkit.models.events import EventFrameClassifier as _EventFrameClassifier
 from slipkit.train.task import Task, TaskResult
 
 log = logging.getLogger("slipkit.davis")
@@ -72,6 +74,10 @@ class DavisRelease(Task):
     learned from the labels), so the training trials are as unseen as a CV fold would
     be, and a sweep over its parameters never reads the test half.
     """
+
+    accepts = (_DavisPolarity, _EventFrameClassifier)
+    refuses = ()
+    feeds = "runs a DAVIS event-frame detector (the polarity rule or a learned one)"
 
     objective = "validation.mean.f1"
     direction = "maximize"

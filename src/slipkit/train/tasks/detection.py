@@ -67,6 +67,7 @@ from numpy.typing import NDArray
 from sklearn.base import clone
 from sklearn.metrics import roc_auc_score, roc_curve
 
+from slipkit.baselines.base import StreamDetector as _StreamDetector
 from slipkit.baselines.base import segment_bounds
 from slipkit.data.dataset import Dataset
 from slipkit.data.splits import TrialSplit, split_by_group, split_by_trial
@@ -292,6 +293,10 @@ class StreamDetection(Task):
     cv : int
         Folds of that validation (fewer when the training side has fewer groups).
     """
+
+    accepts = (_StreamDetector,)
+    refuses = ()
+    feeds = "runs an analytic stream detector (StreamDetector) on stream {stream}"
 
     objective = "validation.samples.auc"
     direction = "maximize"

@@ -24,13 +24,14 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from sklearn.base import RegressorMixin as _RegressorMixin
 from sklearn.base import clone
 
 from slipkit.data.dataset import Dataset
 from slipkit.data.splits import split_time_blocks
 from slipkit.errors import SlipkitError
 from slipkit.evaluate.metrics import regression_metrics
-from slipkit.train.task import Task, TaskResult
+from slipkit.train.task import Task, TaskResult, analytic_estimators
 
 log = logging.getLogger("slipkit.force")
 
@@ -283,6 +284,10 @@ class ForceRegression(Task):
         (train + val), each block held out once; never the test blocks. 0 or 1: none
         (the objective is then missing).
     """
+
+    accepts = (_RegressorMixin,)
+    refuses = analytic_estimators()
+    feeds = "fits a learned regressor on frames of stream {stream}"
 
     objective = "validation.rmse_mean"
     direction = "minimize"

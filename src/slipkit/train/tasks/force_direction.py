@@ -11,12 +11,13 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from sklearn.base import RegressorMixin as _RegressorMixin
 from sklearn.base import clone
 
 from slipkit.data.dataset import Dataset
 from slipkit.data.splits import split_by_group, split_by_trial
 from slipkit.errors import SlipkitError
-from slipkit.train.task import Task, TaskResult
+from slipkit.train.task import Task, TaskResult, analytic_estimators
 from slipkit.train.tasks.force import (
     Frames,
     Sides,
@@ -146,6 +147,10 @@ class FingerDirection(Task):
     compare : mapping or list, optional
         Further models fitted on the same split (``comparison.csv/.md``).
     """
+
+    accepts = (_RegressorMixin,)
+    refuses = analytic_estimators()
+    feeds = "fits a learned regressor on frames of stream {stream}"
 
     objective = "validation.angle_mean_deg"
     direction = "minimize"

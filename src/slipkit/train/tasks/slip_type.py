@@ -39,6 +39,7 @@ from typing import Any, cast
 
 import numpy as np
 import pandas as pd
+from sklearn.base import ClassifierMixin as _ClassifierMixin
 from sklearn.base import clone
 from sklearn.dummy import DummyClassifier
 from sklearn.model_selection import GroupKFold, StratifiedGroupKFold
@@ -56,7 +57,7 @@ from slipkit.features.windows import (
     sliding_windows,
 )
 from slipkit.models.selection import fit_with_groups
-from slipkit.train.task import Task, TaskResult
+from slipkit.train.task import Task, TaskResult, analytic_estimators
 from slipkit.train.tasks.slip_type_plots import _pct, _plot_time, _width_outputs
 
 log = logging.getLogger("slipkit.slip_type")
@@ -248,6 +249,10 @@ class WindowClassification(Task):
     nan_policy : {"raise", "omit", "propagate"}
         Non-finite frames (see :func:`~slipkit.features.windows.sliding_windows`).
     """
+
+    accepts = (_ClassifierMixin,)
+    refuses = analytic_estimators()
+    feeds = "fits a learned classifier on windows of stream {stream}"
 
     #: a validation score on the training side only (the saved model's leave-one-object-out
     #: selection score, or a group k-fold of the fixed model): what a sweep may optimise

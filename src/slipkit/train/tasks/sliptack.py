@@ -23,9 +23,12 @@ import numpy as np
 import pandas as pd
 from sklearn.base import clone
 
+from slipkit.baselines.sliptack import StickSlipSpeed as _StickSlipSpeed
+from slipkit.baselines.sliptack_accel import DropAcceleration as _DropAcceleration
 from slipkit.data.dataset import Dataset, Trial
 from slipkit.data.splits import TrialSplit, split_by_trial
 from slipkit.errors import SlipkitError
+from slipkit.models.spectral import SpectralSpeedRegressor as _SpectralSpeedRegressor
 from slipkit.train.search import trial_cv
 from slipkit.train.task import Task, TaskResult
 
@@ -110,6 +113,12 @@ class SlipTackSpeed(Task):
     speed_label, onset_label : str
         Trial labels: pull speed (mm/s) and pull start (s).
     """
+
+    accepts = (_StickSlipSpeed, _SpectralSpeedRegressor)
+    refuses = ()
+    feeds = (
+        "runs the SlipTack speed estimator (eq. 3 inverted) or a learned spectral one"
+    )
 
     #: validation: calibrations refitted by group CV by trial on the training half
     objective = "validation.overall.mae_mm_s"
@@ -398,6 +407,10 @@ class SlipTackAccel(Task):
     group : str
         Group column used to stratify the split.
     """
+
+    accepts = (_DropAcceleration,)
+    refuses = ()
+    feeds = "runs the SlipTack drop estimator"
 
     #: validation: calibrations refitted by group CV by trial on the training half
     objective = "validation.deflection.rmse_m_s2"

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
+from sklearn.base import ClassifierMixin as _ClassifierMixin
 from sklearn.base import clone
 from sklearn.model_selection import GroupKFold, cross_val_predict
 
@@ -52,7 +53,7 @@ from slipkit.train.search import (
     optuna_search,
     selection_record,
 )
-from slipkit.train.task import Task, TaskResult
+from slipkit.train.task import Task, TaskResult, analytic_estimators
 
 log = logging.getLogger("slipkit.tactip")
 LABELS = (STATIC, SLIP)
@@ -88,6 +89,10 @@ class TacTipFrames(Task):
     stream, label : str
         Pins stream and onset label names.
     """
+
+    accepts = (_ClassifierMixin,)
+    refuses = analytic_estimators()
+    feeds = "fits a learned classifier on pin features of stream {stream}"
 
     objective = "validation.balanced_accuracy"
     direction = "maximize"
