@@ -1,4 +1,4 @@
-"""slipkit closedloop scenario=tactip: the analytic pin-motion bundle (alignment_k1) in the loop."""
+"""slipkit closedloop scenario=tactip: the analytic pin-motion bundles (alignment_k1, alignment_fast_k1) in the loop."""
 
 from __future__ import annotations
 
@@ -71,6 +71,64 @@ def test_alignment_bundle_reads_the_raw_pins_stream(alignment_run: Path) -> None
         frame["channels"],
         float(frame["rate_hz"]),
         int(manifest["debounce"]["k"]),
+    )
+
+
+@pytest.fixture(scope="module")
+def fast_run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    """Both pin-motion detectors at the fast retractions (11.8 and 20 mm/s), 1 seed, 2 trials each."""
+    out = tmp_path_factory.mktemp("closedloop_alignment_fast") / "cl"
+    drop = [
+        f"~closedloop.detectors.{d}"
+        for d in ("svm_k1", "svm_k2", "svm_k3", "svm_k4", "svm_linear_k2")
+    ]
+    _run(
+        [
+            f"out={out}",
+            "seeds=[0]",
+            "trials_per_speed=2",
+            "train_trials=8",
+            "closedloop.speeds.lo=11.8",
+            "closedloop.speeds.hi=20.0",
+            "closedloop.speeds.n=2",
+            "closedloop.oracle_delays_ms=[]",
+            *drop,
+        ]
+    )
+    yield out
+    GlobalHydra.instance().clear()
+
+
+def test_fast_alignment_catches_the_fast_slips_the_slow_one_drops(
+    fast_run: Path,
+) -> None:
+    """At 11.8-20 mm/s most slips start before alignment_k1's 24-frame window (0.19 s) is full,
+    so it drops those objects (all at 20 mm/s); alignment_fast_k1 (6 frames) declares every slip
+    at or after its onset, with no false alarm and no drop."""
+    results = pd.read_csv(fast_run / "results.csv")
+    fast = results[results.detector == "alignment_fast_k1"]
+    slow = results[results.detector == "alignment_k1"]
+    assert ((4, 4, 0, 0), (2, 2)) == (
+        (
+            len(fast),
+            int((fast.delay_ms >= 0).sum()),
+            int(fast.false_alarm.sum()),
+            int(fast.dropped.sum()),
+        ),
+        (int((slow.condition == 20.0).sum()), int(slow[slow.condition == 20.0].dropped.sum())),
+    )
+    assert int(slow.dropped.sum()) >= 3  # and one of the two at 11.8 mm/s
+
+
+def test_fast_alignment_bundle_is_a_6_frame_window(fast_run: Path) -> None:
+    """The fast config exports a window of 6 frames (lookback 4 + gap 1 + 1) on the raw pins, debounce 1."""
+    manifest = json.loads(
+        (fast_run / "bundles" / "alignment_fast_k1" / "manifest.json").read_text()
+    )
+    assert ([1, 6, 254], 1, ["pins"]) == (
+        manifest["inputs"][0]["shape"],
+        int(manifest["debounce"]["k"]),
+        manifest["frame"]["streams"],
     )
 
 

@@ -45,6 +45,8 @@ def small(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, pd.DataFrame]
             "~closedloop.runs.svm_linear",
             "~closedloop.detectors.alignment_k1",  # test_tactip_alignment.py runs it
             "~closedloop.runs.alignment",
+            "~closedloop.detectors.alignment_fast_k1",
+            "~closedloop.runs.alignment_fast",
         ],
     )
     yield tmp / "cl", summary

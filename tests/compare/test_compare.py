@@ -121,12 +121,16 @@ def test_classification_comparison_writes_report(tmp_path: Path) -> None:
     report = compare_main(cfg)
     assert out / "report.md" == report
     df = pd.read_csv(out / "metrics.csv")
-    assert ["svm_rbf", "svm_rbf_tuned", "svm_linear", "alignment"] == df[
-        "estimator"
-    ].tolist()
+    assert [
+        "svm_rbf",
+        "svm_rbf_tuned",
+        "svm_linear",
+        "alignment",
+        "alignment_fast",
+    ] == df["estimator"].tolist()
     assert set(COLUMNS) <= set(df.columns)
     assert set(ROW_COLUMNS) <= set(df.columns)
-    assert ["ok"] * 4 == df["export"].tolist()
+    assert ["ok"] * 5 == df["export"].tolist()
     # CV fits count: the search's (3 candidates x 3 folds), or the 3-fold validation of
     # the untuned rows (the run's objective), then the final fit, then the 3 folds whose
     # out-of-fold decisions choose the debounce (the operating point).

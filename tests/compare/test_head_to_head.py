@@ -46,7 +46,7 @@ def test_tactip_svms_beside_the_pin_motion_detector(tmp_path: Path) -> None:
         ],
     )
     kinds = dict(zip(df["estimator"], df["kind"], strict=True))
-    assert "analytic" == kinds["alignment"]
+    assert ("analytic", "analytic") == (kinds["alignment"], kinds["alignment_fast"])
     assert "learned" == kinds["svm_rbf"]
     assert ["ok"] * len(df) == df["export"].tolist()
     assert True == bool(np.isfinite(df["delay_ms"]).all())  # noqa: E712
