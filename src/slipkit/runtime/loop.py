@@ -552,7 +552,7 @@ class StreamLoop:
         self._window0 = self._windows[0]
         # Hop 1 (the BioTac force models: one-frame windows) takes _step_hop1, a
         # hand-written copy of step's good-frame path: step's fixed work (~3 us)
-        # is as long as a one-node graph's call, so the issue-16 target (loop <=
+        # is as long as a one-node graph's call, so the target (loop <=
         # 2x the bare call) needs the branches and the frame's own finiteness test
         # it leaves out (docs/deploy.md, "Fewer nodes, less loop work"). Only when
         # every op keeps a NaN or infinity non-finite (Op's keeps_nonfinite) and
