@@ -542,6 +542,19 @@ _PERCENT = {
 _NAMES = {"rmse": "RMSE", "smse": "SMSE", "f1": "F1", "roc_auc": "ROC AUC"}
 
 
+def _pm_sig(row: dict[str, Any], key: str, digits: int = 3) -> str:
+    """``row[key]`` to ``digits`` significant digits, its std to the same decimals
+    (``0.231 ± 0.006``, ``17.0 ± 1.4``, ``190 ± 22``); ``-`` when missing."""
+    mean = row.get(key)
+    if not isinstance(mean, int | float) or isinstance(mean, bool):
+        return "-"
+    if not math.isfinite(mean):
+        return "-"
+    size = math.floor(math.log10(abs(mean))) if mean else 0
+    decimals = max(digits - 1 - size, 0)
+    return _pm(row, key, f"{{:.{decimals}f}}")
+
+
 def _pct(row: dict[str, Any], key: str) -> str:
     """``row[key]`` (a fraction) as ``97 ± 3 %``; "" when missing."""
     scaled = {
@@ -555,7 +568,7 @@ def _pct(row: dict[str, Any], key: str) -> str:
 
 def detection_cell(row: dict[str, Any]) -> str:
     """The verdict's primary metric with its name and unit (mean ± std over seeds):
-    ``RMSE 0.25 ± 0.02 N``, ``accuracy 91 ± 2 %``, ``cost 0.12 ± 0.03 (detected 97 %)``
+    ``RMSE 0.250 ± 0.020 N``, ``accuracy 91 ± 2 %``, ``cost 0.120 ± 0.030 (detected 97 %)``
     (the trial cost is in missed slips per trial)."""
     from slipkit.compare.table import metric_unit
 
@@ -565,7 +578,7 @@ def detection_cell(row: dict[str, Any]) -> str:
     if primary in _PERCENT:
         text = _pct(row, primary)
         return f"{_PERCENT[primary]} {text}" if text else "-"
-    value = _pm(row, primary, "{:.3g}")
+    value = _pm_sig(row, primary)
     if value == "-":
         return "-"
     unit = metric_unit(primary, list(row))
@@ -580,8 +593,8 @@ def false_alarm_cell(row: dict[str, Any]) -> str:
     parts = []
     early = _pct(row, "early_alarm_rate")
     if early:
-        parts.append(f"{early} of trials early")
-    per_min = _pm(row, "false_alarms_per_min", "{:.2g}")
+        parts.append(f"early in {early} of trials")
+    per_min = _pm_sig(row, "false_alarms_per_min", 2)
     if per_min != "-":
         parts.append(f"{per_min} /min")
     return "; ".join(parts) or "-"

@@ -165,8 +165,8 @@ def test_family_rows_show_the_verdicts_own_closed_loop_or_dash_with_a_reason() -
     assert (
         "tactip",
         "svm_rbf",
-        "cost 0.12 ± 0.03 (detected 97 ± 3 %)",
-        "10 % of trials early",
+        "cost 0.120 ± 0.030 (detected 97 ± 3 %)",
+        "early in 10 % of trials",
         "16.7 ± 4.0",
         "1.2",
         "0",
@@ -176,7 +176,7 @@ def test_family_rows_show_the_verdicts_own_closed_loop_or_dash_with_a_reason() -
     # not recommended: the best-scoring one's numbers, no closed loop, the reason
     assert (
         "none (best: polarity_lines)",
-        "F1 0.5",
+        "F1 0.500",
         "-",
         "-",
         "-",
@@ -191,7 +191,7 @@ def test_family_rows_show_the_verdicts_own_closed_loop_or_dash_with_a_reason() -
         "no closed loop: spectral_gbr decides no slip in a grasp",
     ) == (rows["sliptack"][2], *rows["sliptack"][5:])
     assert (
-        "RMSE 0.25 N",
+        "RMSE 0.250 N",
         "1.5 /min",
         "-",
         "no closed-loop scenario",
