@@ -802,7 +802,7 @@ def _closedloop_size(cfg: DictConfig) -> str:
     trials = "the scenario's" if tps is None else str(int(tps))
     return (
         f"seed{'s' if len(seeds) > 1 else ''} {', '.join(seeds)}, "
-        f"{trials} trials per condition"
+        f"{trials} trial{'' if trials == '1' else 's'} per condition"
     )
 
 
