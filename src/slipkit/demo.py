@@ -19,10 +19,12 @@ Stages, each with a progress bar and its wall time printed at the end:
    against the sensor's budget by the latency rule (:mod:`slipkit.runtime.budget`, as
    ``slipkit-run --check`` does), printing each bundle's status;
 6. **closed loop**: every closed-loop scenario that exists (``configs/closedloop``,
-   ``slipkit closedloop``), demo-sized, into ``<out>/closedloop/<scenario>``: slip at
-   arrest (mm) and drops (%) of the family's detectors;
-7. **report**: ``<out>/report.md`` opens with one row per family (verdict, accuracy,
-   delay, slip mm, drop %, p99 against the budget) and links each family's reports.
+   ``slipkit closedloop``), demo-sized, into ``<out>/closedloop/<scenario>``, with the
+   verdict's own detector (:func:`closedloop_pick`): slip at arrest (mm) and drops (%);
+   no detector (no verdict recommended, or one that decides no slip in a grasp): not run;
+7. **report**: ``<out>/report.md`` opens with one row per family (:data:`FAMILY_HEADERS`:
+   verdict, detection, false alarms, delay, slip mm, drop %, p99 against the budget, a
+   note) and links each family's reports.
 
 The report's path is printed last. ``quick=true`` shrinks every family (tiny data,
 few epochs) for the tests.
@@ -156,42 +158,68 @@ def closedloop_plan(
     return plan
 
 
-def _closedloop_row(summary: pd.DataFrame, shown: str | None) -> dict[str, Any]:
-    """The summary row the family table shows: ``shown`` if it ran, else the first bundle detector."""
+def _closedloop_row(summary: pd.DataFrame, shown: str) -> dict[str, Any]:
+    """The summary row of detector ``shown`` (empty when it did not run: never another's)."""
     if summary.empty:
         return {}
-    bundles = summary[summary["kind"].astype(str) == "bundle"]
-    pick = (
-        summary[summary["detector"].astype(str) == str(shown)] if shown else bundles[:0]
-    )
-    if pick.empty:
-        pick = bundles
+    pick = summary[summary["detector"].astype(str) == str(shown)]
     if pick.empty:
         return {}
     return {str(k): v for k, v in pick.iloc[0].to_dict().items()}
 
 
-def _closedloop_detector(
-    name: str, overrides: list[str], verdict: str, shown: dict[str, Any]
-) -> tuple[str | None, list[str]]:
-    """The scenario's detector standing for the family's verdict, and the overrides that
-    leave the others out (the demo runs one detector beside the oracle and no-detector
-    bounds; ``slipkit closedloop scenario=<name>`` runs them all).
+def closedloop_pick(
+    scenario: str,
+    verdict: str,
+    recommended: bool,
+    detectors: list[str],
+    shown: dict[str, Any],
+) -> tuple[str | None, str]:
+    """The scenario's detector that *is* the family's verdict, or None and why in a few words.
 
-    ``shown`` maps a verdict estimator to a detector (``closedloop.detector.<name>``);
-    else a detector named as the verdict; else the scenario's first detector.
+    ``shown`` maps a verdict estimator to its detector (``closedloop.detector.<scenario>``);
+    else the detector named as the verdict. No verdict, a verdict not recommended, or a
+    verdict without a detector (it cannot decide slip in a grasp): None, so the family's
+    row never shows one detector's score beside another's grasp.
+
+    Raises
+    ------
+    SlipkitError
+        ``shown`` names a detector the scenario does not have.
     """
+    if not verdict:
+        return None, "no verdict: no closed loop"
+    if not recommended:
+        return None, "no closed loop: no detector recommended"
+    pick = shown.get(verdict)
+    if pick is not None:
+        if str(pick) not in detectors:
+            raise SlipkitError(
+                f"closedloop.detector.{scenario}.{verdict}={pick}: not a detector of "
+                f"configs/closedloop/{scenario}.yaml ({', '.join(detectors)})"
+            )
+        return str(pick), ""
+    if verdict in detectors:
+        return verdict, ""
+    return None, f"no closed loop: {verdict} decides no slip in a grasp"
+
+
+def _closedloop_detector(
+    name: str,
+    overrides: list[str],
+    verdict: str,
+    recommended: bool,
+    shown: dict[str, Any],
+) -> tuple[str | None, list[str], str]:
+    """:func:`closedloop_pick` on the scenario's detectors, and the overrides that leave
+    the others out (the demo runs the verdict's detector beside the oracle and
+    no-detector bounds; ``slipkit closedloop scenario=<name>`` runs them all)."""
     node = compose(config_name="closedloop", overrides=overrides).closedloop
     names = [str(d) for d in (node.get("detectors") or {})]
-    if not names:
-        return None, []
-    pick = str(shown.get(verdict) or (verdict if verdict in names else names[0]))
-    if pick not in names:
-        raise SlipkitError(
-            f"closedloop.detector.{name}.{verdict}={pick}: not a detector of "
-            f"configs/closedloop/{name}.yaml ({', '.join(names)})"
-        )
-    return pick, [f"~closedloop.detectors.{d}" for d in names if d != pick]
+    pick, why = closedloop_pick(name, verdict, recommended, names, shown)
+    if pick is None:
+        return None, [], why
+    return pick, [f"~closedloop.detectors.{d}" for d in names if d != pick], ""
 
 
 def _run_closedloop(
@@ -405,9 +433,17 @@ def demo_main(cfg: DictConfig) -> Path:
     ):
         t0 = time.perf_counter()
         verdict_est = str(best.get(family, {}).get("estimator", ""))
-        pick, drop = _closedloop_detector(
-            name, overrides, verdict_est, dict(shown.get(name) or {})
+        pick, drop, why = _closedloop_detector(
+            name,
+            overrides,
+            verdict_est,
+            bool(best.get(family, {}).get("recommended", False)),
+            dict(shown.get(name) or {}),
         )
+        if pick is None:
+            closed[family] = {"scenario": name, "why": why}
+            loop_s[name] = time.perf_counter() - t0
+            continue
         try:
             summary = _run_closedloop(
                 cfg, name, [*overrides, *drop], out / CLOSEDLOOP / name
@@ -416,10 +452,16 @@ def demo_main(cfg: DictConfig) -> Path:
             # one scenario that cannot run (e.g. its detector's bundle fails the export
             # parity check) costs its row's closed-loop columns, not the whole demo
             print(f"slipkit demo: closed loop {name}: skipped: {exc}", file=sys.stderr)
-            closed[family] = {"scenario": f"{name} (failed: see the demo's stderr)"}
+            closed[family] = {
+                "scenario": name,
+                "why": f"closed loop {name} failed (see the demo's stderr)",
+            }
             loop_s[name] = time.perf_counter() - t0
             continue
-        closed[family] = {"scenario": name, **_closedloop_row(summary, pick)}
+        shown_row = _closedloop_row(summary, pick)
+        closed[family] = {"scenario": name, "ran": True, "detector": pick, **shown_row}
+        if not shown_row:
+            closed[family]["why"] = f"closed loop {name}: {pick} gave no result"
         loop_s[name] = time.perf_counter() - t0
     stage_s["closed loop"] = time.perf_counter() - t_stage
 
@@ -477,13 +519,99 @@ def _pm(row: dict[str, Any], key: str, spec: str) -> str:
 FAMILY_HEADERS = (
     "family",
     "verdict",
-    "accuracy (primary)",
+    "detection",
+    "false alarms",
     "delay (ms)",
     "slip at arrest (mm)",
     "dropped (%)",
     "p99 / budget (us)",
-    "closed loop",
+    "note",
 )
+
+#: primary metrics shown as a percentage, and their name on the first screen
+_PERCENT = {
+    "accuracy": "accuracy",
+    "balanced_accuracy": "balanced accuracy",
+    "detected_rate": "detected",
+    "on_time_rate": "on time",
+    "tpr": "TPR",
+    "tnr": "TNR",
+    "sequence_accuracy": "sequence accuracy",
+}
+#: other primary metrics' names on the first screen (the rest: the column's own name)
+_NAMES = {"rmse": "RMSE", "smse": "SMSE", "f1": "F1", "roc_auc": "ROC AUC"}
+
+
+def _pm_sig(row: dict[str, Any], key: str, digits: int = 3) -> str:
+    """``row[key]`` to ``digits`` significant digits, its std to the same decimals
+    (``0.231 ± 0.006``, ``17.0 ± 1.4``, ``190 ± 22``); ``-`` when missing."""
+    mean = row.get(key)
+    if not isinstance(mean, int | float) or isinstance(mean, bool):
+        return "-"
+    if not math.isfinite(mean):
+        return "-"
+    size = math.floor(math.log10(abs(mean))) if mean else 0
+    decimals = max(digits - 1 - size, 0)
+    return _pm(row, key, f"{{:.{decimals}f}}")
+
+
+def _pct(row: dict[str, Any], key: str) -> str:
+    """``row[key]`` (a fraction) as ``97 ± 3 %``; "" when missing."""
+    scaled = {
+        k: 100.0 * float(row[k])
+        for k in (key, f"{key}_std")
+        if isinstance(row.get(k), int | float) and not isinstance(row.get(k), bool)
+    }
+    text = _pm(scaled, key, "{:.0f}")
+    return "" if text == "-" else f"{text} %"
+
+
+def detection_cell(row: dict[str, Any]) -> str:
+    """The verdict's primary metric with its name and unit (mean ± std over seeds):
+    ``RMSE 0.250 ± 0.020 N``, ``accuracy 91 ± 2 %``, ``cost 0.120 ± 0.030 (detected 97 %)``
+    (the trial cost is in missed slips per trial)."""
+    from slipkit.compare.table import metric_unit
+
+    primary = str(row.get("primary", ""))
+    if not primary or row.get(primary) is None:
+        return "-"
+    if primary in _PERCENT:
+        text = _pct(row, primary)
+        return f"{_PERCENT[primary]} {text}" if text else "-"
+    value = _pm_sig(row, primary)
+    if value == "-":
+        return "-"
+    unit = metric_unit(primary, list(row))
+    text = f"{_NAMES.get(primary, primary)} {value}" + (f" {unit}" if unit else "")
+    detected = _pct(row, "detected_rate")
+    return f"{text} (detected {detected})" if detected else text
+
+
+def false_alarm_cell(row: dict[str, Any]) -> str:
+    """The verdict's false alarms as its comparison reports them: the share of test trials
+    with an early alarm and / or alarms per minute of non-slip time; ``-`` when neither."""
+    parts = []
+    early = _pct(row, "early_alarm_rate")
+    if early:
+        parts.append(f"early in {early} of trials")
+    per_min = _pm_sig(row, "false_alarms_per_min", 2)
+    if per_min != "-":
+        parts.append(f"{per_min} /min")
+    return "; ".join(parts) or "-"
+
+
+def budget_cell(row: dict[str, Any]) -> str:
+    """``p99 / budget (ratio)`` with the latency rule's word when not plainly within."""
+    from slipkit.runtime.budget import judge_p99
+
+    p99 = float(row.get("p99_us", math.nan))
+    budget = float(row.get("budget_p99_us", math.nan))
+    if math.isfinite(p99) and math.isfinite(budget) and budget > 0:
+        status = judge_p99(p99, budget).status
+        word = "" if status == "within" else f", {status}"
+        return f"{p99:.1f} / {budget:.4g} ({p99 / budget:.2f}x{word})"
+    check = str(row.get("export", "-")) or "-"
+    return check if len(check) <= 40 else check[:37] + "..."
 
 
 def family_rows(
@@ -491,45 +619,44 @@ def family_rows(
     best: dict[str, dict[str, Any]],
     closed: dict[str, dict[str, Any]],
 ) -> list[tuple[str, ...]]:
-    """One row per family: verdict, its primary metric and delay (mean ± std over seeds),
-    slip at arrest and drop rate of the closed-loop scenario (``-`` without one), and
-    the p99 the budget was checked on against that budget."""
+    """One row per family (:data:`FAMILY_HEADERS`): the verdict, its primary metric, false
+    alarms and delay (mean ± std over seeds), slip at arrest and drop rate of the *same*
+    detector in the family's closed-loop scenario, its p99 against the budget, and a note:
+    the closed-loop detector shown, or why there is none / no verdict.
+
+    The closed-loop columns are ``-`` unless ``closed[family]`` holds the verdict's own
+    detector (``closed[family]["ran"]``, as :func:`demo_main` fills it)."""
     rows: list[tuple[str, ...]] = []
     for family in results:
         b = best.get(family, {})
         c = closed.get(family, {})
-        est = str(b.get("estimator", "-"))
-        verdict = (
-            est
-            if b.get("recommended", False)
-            else f"none recommended ({est}: {b.get('why_not', 'see report')})"
-            if b
-            else "-"
-        )
-        primary = str(b.get("primary", ""))
-        acc = _pm(b, primary, "{:.3f}") if primary else "-"
-        p99 = float(b.get("p99_us", math.nan))
-        budget = float(b.get("budget_p99_us", math.nan))
-        if math.isfinite(p99) and math.isfinite(budget) and budget > 0:
-            check = f"{p99:.1f} / {budget:.4g} ({p99 / budget:.2f}x)"
+        est = str(b.get("estimator", ""))
+        recommended = bool(b.get("recommended", False))
+        ran = bool(c.get("ran")) and "why" not in c and recommended
+        if not b:
+            verdict, note = "-", "no estimator to rank"
+        elif not recommended:
+            verdict = f"none (best: {est})"
+            note = f"{est}: {b.get('why_not', 'see its report')}"
         else:
-            check = str(b.get("export", "-")) or "-"
-            check = check if len(check) <= 40 else check[:37] + "..."
-        loop = (
-            f"{c['scenario']}: {c.get('detector', '-')}"
-            if c.get("detector")
-            else c.get("scenario", "-")
-        )
+            verdict = est
+            if ran:
+                note = f"closed loop {c['scenario']}: {c.get('detector', est)}"
+            elif c:
+                note = str(c.get("why", "no closed loop"))
+            else:
+                note = "no closed-loop scenario"
         rows.append(
             (
                 family,
                 verdict,
-                f"{primary} {acc}" if primary else acc,
+                detection_cell(b) if b else "-",
+                false_alarm_cell(b) if b else "-",
                 _pm(b, "delay_ms", "{:.1f}"),
-                _pm(c, "slip_mm", "{:.1f}"),
-                _pm(c, "dropped_pct", "{:.0f}"),
-                check,
-                loop,
+                _pm(c, "slip_mm", "{:.1f}") if ran else "-",
+                _pm(c, "dropped_pct", "{:.0f}") if ran else "-",
+                budget_cell(b) if b else "-",
+                note,
             )
         )
     return rows
@@ -586,13 +713,16 @@ def _write_index(
         f"({', '.join(map(str, seeds))}) among the estimators whose bundle exports and "
         "whose p99 per frame (the median of 5 block p99s over every seed's timed decisions, "
         "onnxruntime, 1 thread, batch 1) meets the sensor's budget; each family's report "
-        "says why the higher-scoring ones were passed over. Accuracy and delay: the "
-        "family's primary metric and median detection delay, mean ± std over the seeds. "
-        "Slip at arrest (caught objects) and dropped objects: `slipkit closedloop` on the "
-        "family's scenario (demo-sized: "
-        f"{_closedloop_size(cfg)}), the detector named in the last column deciding "
-        "through its bundle in the runtime loop; `-`: no closed-loop scenario for the "
-        "family yet.",
+        "says why the higher-scoring ones were passed over (`none`: no estimator passes; "
+        "the numbers are then the best-scoring one's, the note says why). Detection: the "
+        "family's primary metric with its unit (a trial cost is in missed slips per trial, "
+        "with the share of slips detected); false alarms: the share of test trials with an "
+        "alarm before the slip and / or alarms per minute of non-slip time; delay: median "
+        "detection delay; all mean ± std over the seeds. Slip at arrest (caught objects) "
+        "and dropped objects: `slipkit closedloop` on the family's scenario (demo-sized: "
+        f"{_closedloop_size(cfg)}) with the verdict's own detector deciding through its "
+        "bundle in the runtime loop (named in the note); `-` with the reason in the note "
+        "when there is none. p99 / budget: `borderline` or `over` by the latency rule.",
         "",
         f"Made by `slipkit demo{' quick=true' if cfg.get('quick') else ''}` in "
         f"{stage_s.get('total', math.nan):.0f} s; {stage_text(stage_s)}.",
@@ -632,11 +762,12 @@ def _write_index(
             )
             + " |"
         )
-    if closed:
+    if any(c.get("ran") for c in closed.values()):
         lines += ["", "Closed-loop reports: "]
         lines[-1] += ", ".join(
             f"[{c['scenario']}](closedloop/{c['scenario']}/report.md)"
             for c in closed.values()
+            if c.get("ran")
         )
     lines += _controls_section(best)
     lines += ["", "## Accuracy against compute, per family", ""]
@@ -671,7 +802,7 @@ def _closedloop_size(cfg: DictConfig) -> str:
     trials = "the scenario's" if tps is None else str(int(tps))
     return (
         f"seed{'s' if len(seeds) > 1 else ''} {', '.join(seeds)}, "
-        f"{trials} trials per condition"
+        f"{trials} trial{'' if trials == '1' else 's'} per condition"
     )
 
 

@@ -30,7 +30,14 @@ def alignment_run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     out = tmp_path_factory.mktemp("closedloop_alignment") / "cl"
     drop = [
         f"~closedloop.detectors.{d}"
-        for d in ("svm_k1", "svm_k2", "svm_k3", "svm_k4", "svm_linear_k2")
+        for d in (
+            "svm_k1",
+            "svm_k2",
+            "svm_k3",
+            "svm_k4",
+            "svm_linear_k2",
+            "svm_tuned_k2",
+        )
     ]
     _run(
         [

@@ -11,6 +11,7 @@ from hydra import compose, initialize_config_dir
 from slipkit import config_dir
 from slipkit.demo import (
     FAMILY_HEADERS,
+    closedloop_pick,
     closedloop_plan,
     demo_main,
     demo_seeds,
@@ -56,13 +57,20 @@ def test_demo_smoke_two_families(
     assert {"tactip", "biotac_slip"} == set(rows)
     shown = {
         "svm_rbf": "svm_k2",
-        "svm_rbf_tuned": "svm_k2",
+        "svm_rbf_tuned": "svm_tuned_k2",
         "svm_linear": "svm_linear_k2",
         "alignment": "alignment_k1",
+        "alignment_fast": "alignment_fast_k1",
     }
     verdict = rows["tactip"][2].strip()
-    assert f"tactip: {shown.get(verdict, 'svm_k1')}" == rows["tactip"][8].strip()
-    assert "-" != rows["tactip"][5].strip()  # slip at arrest (mm) from the closed loop
+    if (
+        verdict in shown
+    ):  # the verdict's own detector, its slip at arrest beside its score
+        assert f"closed loop tactip: {shown[verdict]}" == rows["tactip"][9].strip()
+        assert "-" != rows["tactip"][6].strip()
+    else:  # no verdict recommended: no closed loop, the note says why
+        assert verdict.startswith("none (best: ")
+        assert ("-", "-") == (rows["tactip"][6].strip(), rows["tactip"][7].strip())
     for family in ("tactip", "biotac_slip"):
         assert f"compare/{family}/report.md" in "\n".join(lines)
         assert (tmp_path / "demo" / "compare" / family / "report.md").is_file()
@@ -77,14 +85,18 @@ def test_demo_smoke_two_families(
 
 
 def _fake_results() -> tuple[dict, dict, dict]:
-    results = {"tactip": None, "davis": None}
+    results = {"tactip": None, "davis": None, "sliptack": None, "biotac_force": None}
     best = {
         "tactip": {
             "estimator": "svm_rbf",
             "recommended": True,
-            "primary": "balanced_accuracy",
-            "balanced_accuracy": 0.9,
-            "balanced_accuracy_std": 0.02,
+            "primary": "cost",
+            "cost": 0.12,
+            "cost_std": 0.03,
+            "detected_rate": 0.97,
+            "detected_rate_std": 0.03,
+            "early_alarm_rate": 0.1,
+            "early_alarm_rate_std": math.nan,
             "delay_ms": 16.7,
             "delay_ms_std": 4.0,
             "p99_us": 150.0,
@@ -100,45 +112,131 @@ def _fake_results() -> tuple[dict, dict, dict]:
             "p99_us": 1500.0,
             "budget_p99_us": 1000.0,
         },
+        "sliptack": {
+            "estimator": "spectral_gbr",
+            "recommended": True,
+            "primary": "rmse",
+            "rmse": 20.5,
+            "rmse_std": 1.5,
+            "rmse_speed": 20.5,
+            "p99_us": 90.0,
+            "budget_p99_us": 100.0,
+        },
+        "biotac_force": {
+            "estimator": "lwr",
+            "recommended": True,
+            "primary": "rmse",
+            "rmse": 0.25,
+            "rmse_x": 0.2,
+            "false_alarms_per_min": 1.5,
+            "p99_us": 10.0,
+            "budget_p99_us": 3333.0,
+        },
     }
     closed = {
         "tactip": {
             "scenario": "tactip",
+            "ran": True,
             "detector": "svm_k2",
             "slip_mm": 1.25,
             "slip_mm_std": math.nan,
             "dropped_pct": 0.0,
-        }
+        },
+        # a scenario that ran another detector than the verdict's must never fill the row
+        "davis": {
+            "scenario": "davis",
+            "ran": True,
+            "detector": "polarity_lines",
+            "slip_mm": 3.0,
+            "dropped_pct": 10.0,
+        },
+        "sliptack": {
+            "scenario": "sliptack",
+            "why": "no closed loop: spectral_gbr decides no slip in a grasp",
+        },
     }
     return results, best, closed
 
 
-def test_family_rows_fill_closed_loop_columns_or_dash() -> None:
-    """A family with a scenario shows slip and drops; one without shows '-'; p99 against the budget."""
+def test_family_rows_show_the_verdicts_own_closed_loop_or_dash_with_a_reason() -> None:
+    """Verdict X -> the closed loop of X, else '-' and why; one unit per detection cell;
+    p99 against the budget with the latency rule's word."""
     rows = {r[0]: r for r in family_rows(*_fake_results())}
+    assert len(FAMILY_HEADERS) == len(rows["tactip"])
     assert (
         "tactip",
         "svm_rbf",
-        "balanced_accuracy 0.900 ± 0.020",
+        "cost 0.120 ± 0.030 (detected 97 ± 3 %)",
+        "early in 10 % of trials",
         "16.7 ± 4.0",
         "1.2",
         "0",
         "150.0 / 833.3 (0.18x)",
-        "tactip: svm_k2",
+        "closed loop tactip: svm_k2",
     ) == rows["tactip"]
+    # not recommended: the best-scoring one's numbers, no closed loop, the reason
     assert (
-        "none recommended (polarity_lines: p99 1500 us > 1000 us budget)",
+        "none (best: polarity_lines)",
+        "F1 0.500",
         "-",
         "-",
         "-",
-        "1500.0 / 1000 (1.50x)",
-    ) == (
-        rows["davis"][1],
-        rows["davis"][3],
-        rows["davis"][4],
-        rows["davis"][5],
-        rows["davis"][6],
+        "1500.0 / 1000 (1.50x, over)",
+        "polarity_lines: p99 1500 us > 1000 us budget",
+    ) == (rows["davis"][1], *rows["davis"][2:3], *rows["davis"][4:])
+    assert (
+        "RMSE 20.5 ± 1.5 mm/s",
+        "-",
+        "-",
+        "90.0 / 100 (0.90x, borderline)",
+        "no closed loop: spectral_gbr decides no slip in a grasp",
+    ) == (rows["sliptack"][2], *rows["sliptack"][5:])
+    assert (
+        "RMSE 0.250 N",
+        "1.5 /min",
+        "-",
+        "no closed-loop scenario",
+    ) == (*rows["biotac_force"][2:4], rows["biotac_force"][6], rows["biotac_force"][8])
+
+
+def test_closedloop_pick_never_falls_back_to_another_detector() -> None:
+    """The mapped detector, else the one named as the verdict, else none and why."""
+    names = ["svm_k1", "svm_k2", "alignment_k1"]
+    shown = {"svm_rbf": "svm_k2"}
+    assert ("svm_k2", "") == closedloop_pick("tactip", "svm_rbf", True, names, shown)
+    assert ("svm_k1", "") == closedloop_pick("tactip", "svm_k1", True, names, {})
+    pick, why = closedloop_pick("tactip", "svm_linear", True, names, shown)
+    assert (None, "no closed loop: svm_linear decides no slip in a grasp") == (
+        pick,
+        why,
     )
+    assert (None, "no closed loop: no detector recommended") == closedloop_pick(
+        "tactip", "svm_rbf", False, names, shown
+    )
+    with pytest.raises(
+        SlipkitError, match=r"closedloop.detector.tactip.svm_rbf=svm_k9"
+    ):
+        closedloop_pick("tactip", "svm_rbf", True, names, {"svm_rbf": "svm_k9"})
+
+
+def test_every_compared_estimator_has_its_closed_loop_detector() -> None:
+    """Each estimator of a family with a closed-loop scenario decides slip there as itself."""
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        cfg = compose(config_name="demo")
+        plan = closedloop_plan(cfg, [str(f) for f in cfg.comparisons])
+        assert {"tactip", "biotac", "fsr", "sliptack", "davis"} <= set(plan)
+        for name, (family, overrides) in plan.items():
+            node = compose(config_name="closedloop", overrides=overrides).closedloop
+            names = [str(d) for d in node.detectors]
+            comp = compose(
+                config_name="compare", overrides=[f"comparison={family}"]
+            ).comparison
+            shown = dict(cfg.closedloop.detector.get(name) or {})
+            for est in comp.estimators:
+                pick, why = closedloop_pick(name, str(est), True, names, shown)
+                assert pick is not None, f"{family}.{est}: {why}"
+                run = node.runs[node.detectors[pick].run]
+                assert run.experiment  # a training run the scenario can make
 
 
 def test_closedloop_plan_maps_scenarios_to_compared_families() -> None:
@@ -197,10 +295,10 @@ def test_a_failing_closed_loop_scenario_costs_its_columns_not_the_demo(
     )
     row = report.read_text().splitlines()[4].split("|")
     err = capsys.readouterr().err
-    assert ("tactip", "-", "-", "tactip (failed: see the demo's stderr)") == (
-        row[1].strip(),
-        row[5].strip(),
-        row[6].strip(),
-        row[8].strip(),
-    )
+    assert (
+        "tactip",
+        "-",
+        "-",
+        "closed loop tactip failed (see the demo's stderr)",
+    ) == (row[1].strip(), row[6].strip(), row[7].strip(), row[9].strip())
     assert "closed loop tactip: skipped: parity check failed for fsr_robust" in err

@@ -80,6 +80,7 @@ def _table() -> pd.DataFrame:
     ]
     df = build_table(rows, "rmse")
     df["budget_p99_us"] = 50.0
+    df["export"] = "ok"
     return df
 
 
@@ -132,6 +133,47 @@ def test_pareto_legend_lists_the_kinds_drawn(
     labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
     plt.close(fig)
     assert expected == labels
+
+
+def test_pareto_marks_passed_over_estimators_and_says_how_many_seeds() -> None:
+    """An over-budget row is drawn hollow grey with its own legend entry; the title counts seeds."""
+    df = _table()
+    df.loc[df["estimator"] == "mlp1", "p99_us"] = 500.0  # 10x the 50 us budget
+    df["n_seeds"] = 3
+    pts = plots.pareto_points(df)
+    assert ["p99" in w for w in pts["passed_over"]] == [
+        e == "mlp1" for e in pts["estimator"]
+    ]
+    fig = plots.pareto_figure(df, "rmse", "t")
+    ax = fig.axes[0]
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    hollow = [
+        c for c in ax.collections if c.get_label() == "passed over by the verdict"
+    ]
+    title = ax.get_title()
+    plt.close(fig)
+    assert "passed over by the verdict" in labels
+    assert "learned" not in labels
+    assert 1 == len(hollow)
+    assert 0 == len(hollow[0].get_facecolors())
+    assert "t (3 seeds, mean)" == title
+
+
+def test_per_seed_plots_say_which_seed(figures: list[Any], tmp_path: Path) -> None:
+    """ROC, confusion, delays and curves name the seed they show."""
+    evals = _evals()
+    plots.plot_roc(evals, tmp_path / "r.png", seed=2)
+    plots.plot_confusions(evals, tmp_path / "c.png", seed=2)
+    plots.plot_delays(evals, tmp_path / "d.png")
+    plots.plot_curves(evals, "vs_time", tmp_path / "t.png", seed=2)
+    titles = [
+        fig.get_suptitle() + " ".join(ax.get_title() for ax in fig.axes)
+        for fig in figures
+    ]
+    assert ["seed 2" in t for t in titles] == [True, True, False, True]
+    assert "first seed's run" in titles[2]
+    roc_legend = [t.get_text() for t in figures[0].axes[0].get_legend().get_texts()]
+    assert [t.split(" (")[0] for t in roc_legend] == ["mlp1", "mlp3"]
 
 
 def test_latency_budget_line_faces_the_checked_p99(

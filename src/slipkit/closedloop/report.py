@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -164,20 +165,43 @@ def markdown_table(summary: pd.DataFrame) -> str:
     return "\n".join(lines)
 
 
+#: a detector's debounce variants are named ``<base>_k<k>`` (``svm_k1`` .. ``svm_k4``)
+_DEBOUNCE_SUFFIX = re.compile(r"_k\d+$")
+
+
+def debounce_groups(summary: pd.DataFrame) -> dict[str, pd.DataFrame]:
+    """The bundle detectors grouped by the run their debounce variants share (the name
+    without its ``_k<k>`` suffix), each group's rows in debounce order: one curve per
+    detector over its debounce where the scenario has several, else one point."""
+    bundles = summary[summary["kind"] == "bundle"]
+    if bundles.empty:
+        return {}
+    base = bundles["detector"].astype(str).str.replace(_DEBOUNCE_SUFFIX, "", regex=True)
+    return {
+        str(name): g.sort_values("debounce_k")
+        for name, g in bundles.groupby(base, sort=False)
+    }
+
+
 def headline_plot(summary: pd.DataFrame, path: Path, *, title: str) -> Path:
-    """Slip at arrest against detection delay and against compute per frame (p99).
+    """Slip at arrest against detection delay, false alarms against delay, and slip
+    against compute per frame (p99).
 
     Left: every detector with a finite delay (bundles, oracle, delayed oracles; the
-    delayed oracles as the plant's own curve). Right: the bundles only (the bounds
-    compute nothing), against the p99 of their per-frame latency, with the p99 budget
-    as a vertical line. Error bars: std over seeds.
+    delayed oracles as the plant's own curve), a detector's debounce variants joined in
+    debounce order (:func:`debounce_groups`). Middle: the bundles' false-alarm rate
+    against their delay, joined the same way. Right: the bundles only (the bounds
+    compute nothing), against the p99 of their per-frame latency, with the p99 budget as
+    a vertical line. Error bars: std over seeds.
     """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(14, 4.2), constrained_layout=True)
+    fig, (ax1, ax3, ax2) = plt.subplots(
+        1, 3, figsize=(18, 4.4), constrained_layout=True
+    )
     curve = summary[summary["kind"] == "delayed oracle"]
     base = summary[summary["kind"] == "oracle"]
     plant = pd.concat([base, curve]).sort_values("delay_ms")
@@ -191,24 +215,37 @@ def headline_plot(summary: pd.DataFrame, path: Path, *, title: str) -> Path:
         )
     markers = "osD^vP*Xh"
     bundles = summary[summary["kind"] == "bundle"]
-    for i, (_, r) in enumerate(bundles.iterrows()):
+    for i, (group, g) in enumerate(debounce_groups(summary).items()):
         m = markers[i % len(markers)]
-        ax1.errorbar(
-            r["delay_ms"],
-            r["slip_mm"],
-            xerr=np.nan_to_num(r["delay_ms_std"]),
-            yerr=np.nan_to_num(r["slip_mm_std"]),
-            fmt=m,
-            capsize=3,
-            label=str(r["detector"]),
-        )
+        several = len(g) > 1
+        label = f"{group} (k {', '.join(_num(k, 0) for k in g['debounce_k'])})"
+        for ax, y in ((ax1, "slip_mm"), (ax3, "false_alarm_pct")):
+            bars = ax.errorbar(
+                g["delay_ms"],
+                g[y],
+                xerr=np.nan_to_num(g["delay_ms_std"].to_numpy(float)),
+                yerr=np.nan_to_num(g[f"{y}_std"].to_numpy(float)),
+                fmt=f"{m}-" if several else m,
+                capsize=3,
+                label=label if several else str(g["detector"].iloc[0]),
+            )
+            if several:  # name each point's debounce beside it
+                for _, r in g.iterrows():
+                    ax.annotate(
+                        f"k={_num(r['debounce_k'], 0)}",
+                        (r["delay_ms"], r[y]),
+                        textcoords="offset points",
+                        xytext=(4, 4),
+                        fontsize=7,
+                        color=bars[0].get_color(),
+                    )
         ax2.errorbar(
-            r["p99_us"],
-            r["slip_mm"],
-            yerr=np.nan_to_num(r["slip_mm_std"]),
+            g["p99_us"],
+            g["slip_mm"],
+            yerr=np.nan_to_num(g["slip_mm_std"].to_numpy(float)),
             fmt=m,
             capsize=3,
-            label=str(r["detector"]),
+            label=label if several else str(g["detector"].iloc[0]),
         )
     for _, r in base.iterrows():
         ax1.errorbar(
@@ -218,13 +255,18 @@ def headline_plot(summary: pd.DataFrame, path: Path, *, title: str) -> Path:
             fmt="k*",
             markersize=10,
             capsize=3,
-            label="oracle (zero delay)",
+            label=f"oracle ({_num(r['delay_ms'], 1)} ms)",
         )
     ax1.set_xlabel("detection delay in the loop (ms)")
     ax1.set_ylabel("slip distance at arrest (mm)")
     ax1.set_title("slip against detection delay")
     # Outside the axes: no legend can cover a point, whatever the numbers.
     ax1.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    ax3.set_xlabel("detection delay in the loop (ms)")
+    ax3.set_ylabel("false alarms (% of trials)")
+    ax3.set_title("false alarms against detection delay")
+    for ax in (ax1, ax3):
+        ax.margins(x=0.08, y=0.1)  # room for the k= labels of the edge points
     budgets = bundles["p99_budget_us"].dropna().unique()
     styles = ["--", ":", "-.", (0, (5, 1))]
     for i, b in enumerate(budgets):

@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 
 from slipkit.compare.adapters import Evaluation
-from slipkit.compare.table import metric_unit, score_of
+from slipkit.compare.table import DEFAULT_LIMITS, _rejection, metric_unit, score_of
 
 COLORS = {"learned": "tab:blue", "analytic": "tab:orange"}
 
@@ -33,19 +33,47 @@ def _save(fig: Any, path: Path) -> Path:
 LABEL_OFFSETS = ((6, 5), (6, -11), (-6, 5), (-6, -11))
 
 
-def pareto_points(df: pd.DataFrame) -> pd.DataFrame:
+def seeds_text(df: pd.DataFrame, n_seeds: int | None = None) -> str:
+    """``3 seeds, mean`` / ``1 seed``: how many seeds a table's rows are over
+    (``n_seeds`` given, else the table's ``n_seeds`` column, else one)."""
+    if n_seeds is None:
+        values = pd.to_numeric(
+            df["n_seeds"] if "n_seeds" in df else pd.Series(dtype=float),
+            errors="coerce",
+        ).dropna()
+        n_seeds = int(values.max()) if len(values) else 1
+    return f"{n_seeds} seeds, mean" if n_seeds > 1 else "1 seed"
+
+
+def pareto_points(
+    df: pd.DataFrame, limits: Mapping[str, float | None] | None = None
+) -> pd.DataFrame:
     """What :func:`plot_pareto` draws: one row per estimator with a measured p99 and a score.
+
+    ``limits``: the comparison's verdict limits (:func:`slipkit.compare.table.verdict_limits`;
+    None: the defaults) deciding which rows the verdict passes over.
 
     Returns
     -------
     pandas.DataFrame
         ``estimator``, ``kind``, ``x_us`` (p99 compute per frame, us: the percentile the
         budget is checked on), ``score``, ``pareto`` (bool), ``budget_us`` (the p99
-        budget), ``dx``, ``dy`` (label offset, points, staggered between neighbours).
+        budget), ``passed_over`` (why the verdict cannot recommend it; "" when it can),
+        ``dx``, ``dy`` (label offset, points, staggered between neighbours).
     """
     x = df["p99_us"].to_numpy(float)
     y = df["score"].to_numpy(float)
     ok = df[np.isfinite(x) & np.isfinite(y)]
+    chosen = dict(DEFAULT_LIMITS if limits is None else limits)
+    why = [
+        _rejection(
+            r,
+            max_alarms_per_disturbance=chosen.get("max_alarms_per_disturbance"),
+            max_early_alarm_rate=chosen.get("max_early_alarm_rate"),
+        )
+        or ""
+        for _, r in ok.iterrows()
+    ]
     pts = pd.DataFrame(
         {
             "estimator": ok["estimator"].astype(str).to_numpy(),
@@ -54,6 +82,7 @@ def pareto_points(df: pd.DataFrame) -> pd.DataFrame:
             "score": ok["score"].to_numpy(float),
             "pareto": ok["pareto"].astype(bool).to_numpy(),
             "budget_us": ok["budget_p99_us"].to_numpy(float),
+            "passed_over": why,
         }
     )
     order = np.lexsort((pts["score"].to_numpy(), pts["x_us"].to_numpy()))
@@ -73,20 +102,43 @@ def score_label(primary: str, columns: Sequence[str] = ()) -> str:
     return f"{primary} ({unit or 'fraction, 0-1'})"
 
 
-def pareto_figure(df: pd.DataFrame, primary: str, title: str) -> Any | None:
-    """The Pareto figure (score against p99 compute per frame), or None with nothing to draw."""
-    pts = pareto_points(df)
+def pareto_figure(
+    df: pd.DataFrame,
+    primary: str,
+    title: str,
+    *,
+    limits: Mapping[str, float | None] | None = None,
+    n_seeds: int | None = None,
+) -> Any | None:
+    """The Pareto figure (score against p99 compute per frame), or None with nothing to draw.
+
+    Estimators the verdict passes over (over budget, a limit, not exported) are hollow
+    grey markers with their own legend entry; the title says how many seeds."""
+    pts = pareto_points(df, limits)
     if pts.empty:
         return None
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
-    for kind in sorted(set(pts["kind"])):  # legend entries only for kinds drawn
-        part = pts[pts["kind"] == kind]
+    ok = pts[pts["passed_over"] == ""]
+    for kind in sorted(set(ok["kind"])):  # legend entries only for kinds drawn
+        part = ok[ok["kind"] == kind]
         ax.scatter(
             part["x_us"],
             part["score"],
             c=COLORS.get(kind, "tab:gray"),
             s=40,
             label=kind,
+            zorder=3,
+        )
+    out = pts[pts["passed_over"] != ""]
+    if len(out):
+        ax.scatter(
+            out["x_us"],
+            out["score"],
+            s=40,
+            facecolors="none",
+            edgecolors="0.5",
+            linewidths=1.3,
+            label="passed over by the verdict",
             zorder=3,
         )
     for _, r in pts.iterrows():
@@ -144,19 +196,35 @@ def pareto_figure(df: pd.DataFrame, primary: str, title: str) -> Any | None:
     ax.margins(x=0.12, y=0.12)  # room for the staggered labels of the edge points
     ax.set_xlabel("compute per frame, p99 (us, ONNX runtime loop, 1 thread)")
     ax.set_ylabel(score_label(primary, list(df.columns)))
-    ax.set_title(title, fontsize=10)
+    ax.set_title(f"{title} ({seeds_text(df, n_seeds)})", fontsize=10)
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8, loc="best")
     return fig
 
 
-def plot_pareto(df: pd.DataFrame, primary: str, title: str, path: Path) -> Path | None:
-    """Score against p99 compute per frame (us, log), the Pareto front joined, p99 budget lines."""
-    fig = pareto_figure(df, primary, title)
+def plot_pareto(
+    df: pd.DataFrame,
+    primary: str,
+    title: str,
+    path: Path,
+    *,
+    limits: Mapping[str, float | None] | None = None,
+    n_seeds: int | None = None,
+) -> Path | None:
+    """Score against p99 compute per frame (us, log), the Pareto front joined, p99 budget
+    lines, passed-over estimators hollow grey (:func:`pareto_figure`)."""
+    fig = pareto_figure(df, primary, title, limits=limits, n_seeds=n_seeds)
     return None if fig is None else _save(fig, path)
 
 
-def plot_curves(evals: Mapping[str, Evaluation], which: str, path: Path) -> Path | None:
+def _seed_title(seed: int | None) -> str:
+    """Which seed a per-seed figure shows (the comparison plots its first seed's runs)."""
+    return "first seed's run" if seed is None else f"seed {seed}"
+
+
+def plot_curves(
+    evals: Mapping[str, Evaluation], which: str, path: Path, *, seed: int | None = None
+) -> Path | None:
     """Accuracy against time from onset (``vs_time``) or against window length (``vs_width``)."""
     curves = {
         k: getattr(e, which) for k, e in evals.items() if getattr(e, which) is not None
@@ -182,12 +250,15 @@ def plot_curves(evals: Mapping[str, Evaluation], which: str, path: Path) -> Path
     ax.set_xlabel(xlabel)
     ax.set_ylabel("test accuracy (fraction, 0-1)")
     ax.set_ylim(-0.02, 1.02)
+    ax.set_title(f"test accuracy ({_seed_title(seed)})", fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     return _save(fig, path)
 
 
-def plot_roc(evals: Mapping[str, Evaluation], path: Path) -> Path | None:
+def plot_roc(
+    evals: Mapping[str, Evaluation], path: Path, *, seed: int | None = None
+) -> Path | None:
     """ROC curves on the test side, each estimator's chosen operating point marked."""
     rocs = {k: e.roc for k, e in evals.items() if e.roc is not None}
     if not rocs:
@@ -206,13 +277,15 @@ def plot_roc(evals: Mapping[str, Evaluation], path: Path) -> Path | None:
     ax.plot([0, 1], [0, 1], color="0.6", lw=0.8, ls=":")
     ax.set_xlabel("false positive rate (fraction, 0-1)")
     ax.set_ylabel("true positive rate (fraction, 0-1)")
-    ax.set_title("ROC (dots: the chosen threshold)", fontsize=10)
+    ax.set_title(f"ROC, {_seed_title(seed)} (dots: the chosen threshold)", fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="lower right")
     return _save(fig, path)
 
 
-def plot_delays(evals: Mapping[str, Evaluation], path: Path) -> Path | None:
+def plot_delays(
+    evals: Mapping[str, Evaluation], path: Path, *, seed: int | None = None
+) -> Path | None:
     """Detection delay from the true onset (ms) of every detected test slip, per estimator."""
     data = {k: e.delays_ms for k, e in evals.items() if e.delays_ms}
     if not data:
@@ -232,6 +305,7 @@ def plot_delays(evals: Mapping[str, Evaluation], path: Path) -> Path | None:
     ax.axvline(0.0, color="k", lw=0.8, ls=":")
     ax.set_xlabel("detection delay after the true slip onset (ms)")
     ax.set_ylabel("estimator")
+    ax.set_title(f"detected test slips ({_seed_title(seed)})", fontsize=10)
     ax.grid(alpha=0.3, axis="x")
     return _save(fig, path)
 
@@ -302,7 +376,9 @@ def plot_search(evals: Mapping[str, Evaluation], path: Path) -> Path | None:
     return _save(fig, path)
 
 
-def plot_confusions(evals: Mapping[str, Evaluation], path: Path) -> Path | None:
+def plot_confusions(
+    evals: Mapping[str, Evaluation], path: Path, *, seed: int | None = None
+) -> Path | None:
     """Test confusion matrices (rows: true class, columns: predicted), one panel per estimator."""
     data = {k: e.confusion for k, e in evals.items() if e.confusion is not None}
     if not data:
@@ -336,6 +412,7 @@ def plot_confusions(evals: Mapping[str, Evaluation], path: Path) -> Path | None:
         ax.set_title(f"{name} (counts)", fontsize=9)
         ax.set_xlabel("predicted class", fontsize=8)
     axes[0, 0].set_ylabel("true class", fontsize=8)
+    fig.suptitle(f"test confusion ({_seed_title(seed)})", fontsize=10)
     return _save(fig, path)
 
 
@@ -350,4 +427,5 @@ __all__ = [
     "plot_roc",
     "plot_search",
     "score_label",
+    "seeds_text",
 ]
