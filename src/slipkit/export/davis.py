@@ -8,7 +8,7 @@ slip when ``pos > 0`` and ``pos >= neg``.
 
 :class:`DavisAreaRule` is that rule as a scikit-learn classifier on ``(pos, neg)``
 rows, so the export parity check compares it with its graph; the deployer
-(:func:`slipkit.export.deploy._deploy_davis`) checks the op's areas against the
+(:func:`slipkit.export.deploy_davis._deploy_davis`) checks the op's areas against the
 detector's own (``DavisPolarity.frames``) on the held-out trials.
 """
 
