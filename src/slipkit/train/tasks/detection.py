@@ -52,28 +52,21 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 from hydra.utils import instantiate
 from numpy.typing import NDArray
 from sklearn.base import clone
-from sklearn.metrics import roc_auc_score, roc_curve
+from sklearn.metrics import roc_curve
 
 from slipkit.baselines.base import StreamDetector as _StreamDetector
-from slipkit.baselines.base import segment_bounds
 from slipkit.data.dataset import Dataset
 from slipkit.data.splits import TrialSplit, split_by_group, split_by_trial
 from slipkit.errors import SlipkitError
 from slipkit.evaluate.events import (
-    MINIMISED,
     Cost,
     Limits,
     OperatingPoint,
@@ -87,146 +80,24 @@ from slipkit.evaluate.events import (
 )
 from slipkit.train.search import mean_leaves
 from slipkit.train.task import Task, TaskResult
+from slipkit.train.tasks.detection_data import (
+    Recordings,
+    _auc,
+    _mean_sd,
+    _rates,
+    _roc_choice,
+    _runs,
+)
+from slipkit.train.tasks.detection_report import (
+    _direction,
+    _plain,
+    _plot_roc,
+    _summary_block,
+    operating_point_line,
+)
 
 log = logging.getLogger("slipkit.detection")
 FloatArray = NDArray[np.float64]
-
-
-@dataclass
-class Recordings:
-    """One stream of a set of trials, concatenated for a detector.
-
-    Attributes
-    ----------
-    X : ndarray (n_samples, n_channels)
-        The stream's channels, trial after trial.
-    y : ndarray of int (n_samples,)
-        1 = slip sample.
-    t : ndarray (n_samples,)
-        Sample times (s), restarting in every trial.
-    segments : ndarray of int (n_samples,)
-        Trial index of every sample.
-    trial_ids, groups : list of str
-        Per trial.
-    onset_s, reference_s : ndarray (n_trials,)
-        Slip onset and reference onset per trial (s; NaN = none).
-    disturbance : ndarray of bool (n_samples,) or None
-        Disturbance samples (a truth column), if asked for.
-    rate_hz : float
-        The stream's sample rate (Hz).
-    slipped : list of bool or None, optional
-        Per trial: did it slip (None: unknown; :func:`slipkit.evaluate.events.slipped_of`).
-        Not given: a trial slipped when its onset is known.
-    """
-
-    X: FloatArray
-    y: NDArray[np.int_]
-    t: FloatArray
-    segments: NDArray[np.int_]
-    trial_ids: list[str]
-    groups: list[str]
-    onset_s: FloatArray
-    reference_s: FloatArray
-    disturbance: NDArray[np.bool_] | None
-    rate_hz: float
-    slipped: list[bool | None] | None = None
-
-    def bounds(self) -> list[tuple[int, int]]:
-        """(start, stop) of every trial's samples."""
-        return segment_bounds(len(self.X), self.segments)
-
-    def truths(self) -> list[TrialTruth]:
-        """Each trial's truth for :mod:`slipkit.evaluate.events` (slip samples from ``y``,
-        disturbances as intervals of the disturbance samples)."""
-        out = []
-        for k, (a, b) in enumerate(self.bounds()):
-            t = self.t[a:b]
-            onset = float(self.onset_s[k])
-            slipped = (
-                self.slipped[k] if self.slipped is not None else math.isfinite(onset)
-            )
-            dist: tuple[tuple[float, float], ...] = ()
-            if self.disturbance is not None:
-                dist = tuple(
-                    (float(t[r0]), float(t[r1 - 1]))
-                    for r0, r1 in _runs(self.disturbance[a:b])
-                )
-            out.append(
-                TrialTruth(
-                    self.trial_ids[k],
-                    t,
-                    slipped,
-                    onset,
-                    # unknown onset of a slip: no slip samples to tell time apart
-                    slip=self.y[a:b] > 0
-                    if slipped is False or math.isfinite(onset)
-                    else None,
-                    disturbances=dist,
-                )
-            )
-        return out
-
-    def per_trial(self, scores: FloatArray) -> list[FloatArray]:
-        """``scores`` cut into one array per trial."""
-        return [scores[a:b] for a, b in self.bounds()]
-
-
-def _runs(flags: NDArray[np.bool_]) -> list[tuple[int, int]]:
-    """(start, stop) of every run of True."""
-    f = np.concatenate([[False], flags, [False]]).astype(np.int8)
-    d = np.diff(f)
-    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True))
-
-
-def _roc_choice(y: NDArray[np.int_], s: FloatArray, point: str) -> float:
-    """The threshold at the Youden (or closest-to-corner) point of the ROC of (y, s)."""
-    low = np.finfo(np.float64).min
-    fpr, tpr, thr = roc_curve(y, np.where(np.isfinite(s), s, low))
-    ok = np.isfinite(thr) & (thr > low)
-    fpr, tpr, thr = fpr[ok], tpr[ok], thr[ok]
-    k = (
-        int(np.argmax(tpr - fpr))
-        if point == "youden"
-        else int(np.argmin(np.hypot(fpr, 1.0 - tpr)))
-    )
-    return float(thr[k])
-
-
-def _auc(y: NDArray[np.int_], s: FloatArray) -> float:
-    if len(np.unique(y)) < 2:
-        return float("nan")
-    low = np.finfo(np.float64).min
-    return float(roc_auc_score(y, np.where(np.isfinite(s), s, low)))
-
-
-def _rates(y: NDArray[np.int_], pred: NDArray[np.bool_]) -> dict[str, Any]:
-    pos, neg = y == 1, y == 0
-    tp, fn = int(pred[pos].sum()), int((~pred[pos]).sum())
-    fp, tn = int(pred[neg].sum()), int((~pred[neg]).sum())
-
-    def ratio(a: int, b: int) -> float:
-        return a / (a + b) if a + b else float("nan")
-
-    return {
-        "tp": tp,
-        "fn": fn,
-        "fp": fp,
-        "tn": tn,
-        "tpr": ratio(tp, fn),
-        "tnr": ratio(tn, fp),
-        "fpr": ratio(fp, tn),
-        "fnr": ratio(fn, tp),
-    }
-
-
-def _mean_sd(values: Sequence[float]) -> dict[str, Any]:
-    v = np.asarray([x for x in values if x is not None and math.isfinite(x)])
-    return {
-        "n": len(v),
-        "mean": float(v.mean()) if len(v) else float("nan"),
-        "sd": float(v.std(ddof=1)) if len(v) > 1 else float("nan"),
-        "median": float(np.median(v)) if len(v) else float("nan"),
-    }
 
 
 class StreamDetection(Task):
@@ -999,152 +870,6 @@ class StreamDetection(Task):
         for name, b in blocks:
             lines.extend(_summary_block(name, b, self.group_by))
         return lines
-
-
-def _direction(objective: str) -> str:
-    """``minimize`` for a cost, delay or rate of mistakes, else ``maximize``."""
-    return "minimize" if objective.rsplit(".", 1)[-1] in MINIMISED else "maximize"
-
-
-def _plain(v: Any) -> Any:
-    if isinstance(v, (list, tuple)):
-        return [_plain(x) for x in v]
-    if isinstance(v, (str, int, float, bool)) or v is None:
-        return v
-    return str(v)
-
-
-def _pct(v: Any) -> str:
-    return (
-        "n/a" if v is None or not math.isfinite(float(v)) else f"{100 * float(v):.2f} %"
-    )
-
-
-def _num(v: Any, fmt: str = ".4g") -> str:
-    return "n/a" if v is None or not math.isfinite(float(v)) else format(float(v), fmt)
-
-
-def operating_point_line(name: str, test: Mapping[str, Any], unit: str = "") -> str:
-    """One line: ``<name> at threshold <t> <unit>, debounce 2: slips detected 36/40
-    (90 %), early alarms 3/40 trials (8 %), false alarms 0.8 /min, delay median 42 ms
-    (p90 80 ms), cost 0.21``."""
-    op = test["operating_point"]
-    n_slips, n = int(op["n_slips"]), int(op["event_trials"])
-    detected = n_slips - int(op["missed"])
-    share = f" ({_num(100.0 * detected / n_slips, '.0f')} %)" if n_slips else ""
-    rate = _float(op.get("early_alarm_rate"))
-    early = (
-        "early alarms n/a (onsets unknown)"
-        if not math.isfinite(rate)
-        else f"early alarms {_pct0(rate)} of trials"
-    )
-    unknown = int(op.get("unknown_onset_trials") or 0)
-    note = f" ({unknown} slips of unknown onset: detection only)" if unknown else ""
-    return (
-        f"{name} at threshold {_num(op.get('threshold', test.get('threshold')))}"
-        f"{' ' + unit if unit else ''}, debounce {int(op['debounce_k'])}: slips "
-        f"detected {detected}/{n_slips}{share}{note}, {early}, false alarms "
-        f"{_num(op['false_alarms_per_min'], '.3g')} /min, delay median "
-        f"{_num(op['delay_ms'], '.0f')} ms (p90 {_num(op['delay_p90_ms'], '.0f')} ms), "
-        f"cost {_num(op['cost'], '.3g')} over {n} trials"
-    )
-
-
-def _float(v: Any) -> float:
-    try:
-        return math.nan if v is None else float(v)
-    except (TypeError, ValueError):
-        return math.nan
-
-
-def _pct0(v: float) -> str:
-    return f"{100 * v:.0f} %"
-
-
-def _summary_block(name: str, b: Mapping[str, Any], group_by: str | None) -> list[str]:
-    te, paper, unit = b["test"], b.get("paper", {}), b.get("unit", "")
-
-    def beside(key: str, fmt: Any) -> str:
-        return f" (paper {fmt(paper[key])})" if key in paper else ""
-
-    s, ev, tr = te["samples"], te["events"], te["trials"]
-    lines = [
-        f"{name} ({b['estimator']} on {b['stream']}): threshold {_num(te['threshold'])} "
-        f"{unit} from {b['threshold_from']}{beside('threshold', _num)}",
-        *_point_lines(b.get("operating_point")),
-        f"  test samples: AUC {_num(s['auc'], '.4f')}, TPR {_pct(s['tpr'])}, "
-        f"TNR {_pct(s['tnr'])}, FPR {_pct(s['fpr'])}, FNR {_pct(s['fnr'])}",
-        f"  test events: AUC {_num(ev['auc'], '.4f')}{beside('auc', _num)}, "
-        f"sensitivity {_pct(ev['sensitivity'])}{beside('tpr', _pct)} "
-        f"({ev['tp']}/{ev['n_events']}), specificity {_pct(ev['specificity'])}"
-        f"{beside('tnr', _pct)} ({ev['fp']} of {ev['n_negative_windows']} non-slip "
-        "windows fired)",
-        f"  test trials: {tr['tp']}/{tr['n_slip']} slips detected, {tr['fp']}/{tr['n']} "
-        f"fired before the onset; latency from onset {_num(te['latency_ms']['mean'], '.1f')}"
-        f" +- {_num(te['latency_ms']['sd'], '.1f')} ms",
-    ]
-    if "disturbances" in te:
-        d = te["disturbances"]
-        lines.append(
-            f"  disturbances: {d['fired']} of {d['n']} fired"
-            + (f" (paper: {paper['disturbances']})" if "disturbances" in paper else "")
-        )
-    if "at_paper_threshold" in te:
-        a = te["at_paper_threshold"]
-        lines.append(
-            f"  at the paper's threshold {_num(a['threshold'])} {unit}: events sensitivity "
-            f"{_pct(a['events']['sensitivity'])}, specificity {_pct(a['events']['specificity'])}"
-            + (
-                f", disturbances fired {a['disturbances']['fired']}/{a['disturbances']['n']}"
-                if "disturbances" in a
-                else ""
-            )
-        )
-    if "vs_reference_ms" in te:
-        ref = te["vs_reference_ms"]
-        pref = paper.get("reference_ms", {})
-        for g, st in ref.items():
-            p = pref.get(g)
-            ptxt = f" (paper {p[0]:+.1f} +- {p[1]:.1f} ms)" if p else ""
-            label = "all trials" if g == "all" else f"{group_by}={g}"
-            lines.append(
-                f"  vs reference onset, {label}: {_num(st['mean'], '+.1f')} +- "
-                f"{_num(st['sd'], '.1f')} ms over {st['n']}{ptxt}"
-            )
-    return lines
-
-
-def _point_lines(op: Mapping[str, Any] | None) -> list[str]:
-    """Where the operating point came from and what it cost there (one or two lines)."""
-    if not op:
-        return []
-    lines = [
-        f"  operating point: threshold {_num(op.get('threshold'))}, debounce "
-        f"{op.get('debounce_k')}, from {op.get('from')}"
-        + (
-            f" (validation cost {_num(op['validation'].get('cost'), '.3g')})"
-            if op.get("validation")
-            else ""
-        )
-    ]
-    if op.get("within_limits") is False:
-        lines.append(f"  NOT within the limits: {op.get('note')}")
-    return lines
-
-
-def _plot_roc(curves: Mapping[str, Mapping[str, Any]], path: Path) -> None:
-    fig, ax = plt.subplots(figsize=(4.5, 4.5))
-    for name, cv in curves.items():
-        for unit, (fpr, tpr) in cv.items():
-            ax.plot(fpr, tpr, label=f"{name} ({unit})")
-    ax.plot([0, 1], [0, 1], color="0.7", lw=0.8, ls="--")
-    ax.set_xlabel("false positive rate")
-    ax.set_ylabel("true positive rate")
-    ax.set_title("ROC on the test trials")
-    ax.legend(fontsize=7, loc="lower right")
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
 
 
 __all__ = ["Recordings", "StreamDetection", "operating_point_line"]
