@@ -86,3 +86,28 @@ def test_every_plug_in_table_is_a_registry_that_refuses_duplicates() -> None:
     assert [True] * 6 == [isinstance(t, Registry) for t in tables]
     with pytest.raises(SlipkitError, match="already registered"):
         adapters.register_adapter(ForceRegression, lambda view: None)
+
+
+def test_runtime_steps_come_from_the_detector_class_not_the_deployer():
+    """The FSR detector's press_sign step and the pressure detector's fixed baseline are
+    registered beside their graphs; a class without an entry gets no step; a second
+    registration is refused."""
+    import slipkit.export  # noqa: F401  (registers every family's exporters)
+    from slipkit.baselines.biotac import PressureVibration
+    from slipkit.baselines.fsr import FSRTouchSlip
+    from slipkit.baselines.fsr_onset import FSROnset, FSROnsetLogistic
+    from slipkit.export.registry import (
+        _RUNTIME_STEPS,
+        ExportError,
+        RuntimeSteps,
+        StreamContext,
+        register_runtime_steps,
+        runtime_steps,
+    )
+
+    assert {FSRTouchSlip, PressureVibration, FSROnset} <= set(_RUNTIME_STEPS)
+    assert _RUNTIME_STEPS.for_class(FSROnsetLogistic) is _RUNTIME_STEPS[FSROnset]
+    ctx = StreamContext("s", ["a"], [], [], lambda ids: [])
+    assert RuntimeSteps() == runtime_steps(object(), ctx)
+    with pytest.raises(ExportError):
+        register_runtime_steps(FSROnset, lambda det, ctx: RuntimeSteps())

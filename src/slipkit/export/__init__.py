@@ -41,9 +41,12 @@ from slipkit.export.registry import (
     ExportedGraph,
     ExportError,
     NoExporterError,
+    RuntimeSteps,
+    StreamContext,
     export,
     exporter_for,
     register_exporter,
+    register_runtime_steps,
 )
 from slipkit.export.sklearn import export_sklearn
 from slipkit.export.svm import export_tactip_svm
@@ -63,6 +66,8 @@ __all__ = [
     "ExportError",
     "ExportedGraph",
     "NoExporterError",
+    "RuntimeSteps",
+    "StreamContext",
     "check_parity",
     "export",
     "export_sklearn",
@@ -73,4 +78,5 @@ __all__ = [
     "exporter_for",
     "find_torch_parts",
     "register_exporter",
+    "register_runtime_steps",
 ]

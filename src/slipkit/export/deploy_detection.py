@@ -20,6 +20,7 @@ from slipkit.export.deploy import (
     trial_classes,
     trial_frames,
 )
+from slipkit.export.registry import StreamContext, runtime_steps
 from slipkit.train.runs import Run
 from slipkit.train.task import Task
 
@@ -50,76 +51,21 @@ def _deploy_detection(
     positive = str(options.get("positive") or classes[-1])
     export_options: dict[str, Any] = {}
     notes = []
-    deployed = None
     held = trial_frames(dataset, test_ids, stream, channels)
-    from slipkit.baselines.biotac import PressureVibration
-
-    if isinstance(run.model, PressureVibration) and run.model.baseline is None:
-        # The batch detector measures its baseline per recording; the graph needs a
-        # fixed one: the median over the training recordings (the exporter's helper).
-        # The graph then computes the detector with that fixed baseline, so parity
-        # checks it against that detector (against the per-recording one the
-        # scores differ by the ratio of the baselines, not by rounding), and the note
-        # states how often it decides as the trained detector on the held-out trials.
-        from slipkit.export.detectors import (
-            baseline_agreement,
-            pressure_baseline,
-            with_fixed_baseline,
-        )
-
-        train = [t for t in dataset.trial_ids if str(t) not in set(map(str, test_ids))]
-        rec = trial_frames(dataset, train, stream, channels)
-        X = np.concatenate([r.frames for r in rec])
-        seg = np.concatenate([np.full(len(r.frames), k) for k, r in enumerate(rec)])
-        base = pressure_baseline(run.model, X, segments=seg)
-        deployed = with_fixed_baseline(run.model, base)
-        agree, n = baseline_agreement(
-            run.model,
-            deployed,
-            np.concatenate([r.frames for r in held]),
-            segments=np.concatenate(
-                [np.full(len(r.frames), k) for k, r in enumerate(held)]
-            ),
-        )
-        notes.append(
-            f"fixed pressure baseline {base:.4g} counts RMS (median of the training "
-            "recordings; the trained detector measures one per recording): the bundle "
-            f"deploys PressureVibration(baseline={base:.4g}), which decides as the "
-            f"trained detector on {100 * agree:.2f} % of {n} held-out samples"
-        )
-    steps: list[dict[str, Any]] = []
-    from slipkit.baselines.fsr import FSRTouchSlip
-
-    if isinstance(run.model, FSRTouchSlip) and run.model.input == "voltage":
-        # The runtime takes each stream's rest level from its first samples (the
-        # press_sign op), as the batch detector does per recording, so a stream of the
-        # other wiring is never touched, as in the batch detector; training
-        # wirings of both signs: the press direction is latched at its first press
-        # too. The graph reads the sign-normalised signal (export_fsr_touch_slip).
-        from slipkit.export.detectors import fsr_press_sign_step
-
-        steps = [fsr_press_sign_step(run.model)]
-        sign = (
-            f"wiring sign (its first block mean further than {steps[0]['delta']:g} V "
-            "from rest), as the detector's per-recording polarity"
-            if "sign" not in steps[0]
-            else f"the fitted polarity's sign ({run.model.polarity_})"
-        )
-        notes.append(
-            "press_sign: the stream's rest level (mean of its first "
-            f"{run.model.rest_samples} samples) and {sign}, latched on the gripper "
-            "PC; start the loop (or reset it) at rest before each grasp"
-        )
-    from slipkit.baselines.fsr_onset import FSROnset, slip_sign_step
-
-    if isinstance(run.model, FSROnset):
-        # the onset detectors read the same signed signal, per sample (block 1)
-        steps = [slip_sign_step(run.model)]
-        notes.append(
-            "press_sign: the stream's rest level (mean of its first "
-            f"{run.model.rest_samples} samples) and its wiring sign, latched on the "
-            "gripper PC; start the loop (or reset it) at rest before each grasp"
-        )
+    held_ids = set(map(str, test_ids))
+    extra = runtime_steps(
+        run.model,
+        StreamContext(
+            stream=stream,
+            channels=channels,
+            train_ids=[t for t in dataset.trial_ids if str(t) not in held_ids],
+            held=held,
+            frames=lambda ids: trial_frames(dataset, ids, stream, channels),
+        ),
+    )
+    steps = extra.steps
+    notes.extend(extra.notes)
+    deployed = extra.model
     return Deployment(
         # window and hop come from the graph (DetectorGraph.window / .hop)
         frame=_frame([stream], channels, 1, 1, rate),

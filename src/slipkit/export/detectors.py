@@ -92,6 +92,7 @@ from slipkit.export.biotac_detectors import (  # noqa: F401
     export_force_derivative,
     export_pressure_vibration,
     pressure_baseline,
+    pressure_runtime_steps,
     with_fixed_baseline,
 )
 from slipkit.export.detector_graph import (  # noqa: F401
@@ -127,10 +128,12 @@ from slipkit.export.fsr_touch_slip import (  # noqa: F401
     _fsr_graph_out,
     export_fsr_touch_slip,
     fsr_press_sign_step,
+    fsr_runtime_steps,
 )
 from slipkit.export.parity import onnx_session
 from slipkit.export.registry import (
     register_exporter,
+    register_runtime_steps,
 )
 from slipkit.export.torsion import export_torsional_slip
 
@@ -286,6 +289,8 @@ if __name__ != "__main__":
     register_exporter(ForceDerivative, export_force_derivative)
     register_exporter(PressureVibration, export_pressure_vibration)
     register_exporter(TorsionalSlipDetector, export_torsional_slip)
+    register_runtime_steps(FSRTouchSlip, fsr_runtime_steps)
+    register_runtime_steps(PressureVibration, pressure_runtime_steps)
 
 __all__ = [
     "DEFAULT_TAIL_TOL",

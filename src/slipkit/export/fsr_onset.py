@@ -48,7 +48,13 @@ from slipkit.export.detectors import (
     _float32_range,
     _graph,
 )
-from slipkit.export.registry import DEFAULT_OPSET, register_exporter
+from slipkit.export.registry import (
+    DEFAULT_OPSET,
+    RuntimeSteps,
+    StreamContext,
+    register_exporter,
+    register_runtime_steps,
+)
 
 
 def _cols(g: GraphBuilder, t: str, start: int, stop: int) -> str:
@@ -236,6 +242,20 @@ def _onset_graph(
     )
 
 
+def onset_runtime_steps(det: FSROnset, ctx: StreamContext) -> RuntimeSteps:
+    """The onset detectors read the FSR's signed signal per sample: ``press_sign``."""
+    del ctx
+    return RuntimeSteps(
+        steps=[slip_sign_step(det)],
+        notes=[
+            "press_sign: the stream's rest level (mean of its first "
+            f"{det.rest_samples} samples) and its wiring sign, latched on the "
+            "gripper PC; start the loop (or reset it) at rest before each grasp"
+        ],
+    )
+
+
 register_exporter(FSROnset, export_fsr_onset)
+register_runtime_steps(FSROnset, onset_runtime_steps)
 
 __all__ = ["export_fsr_onset"]

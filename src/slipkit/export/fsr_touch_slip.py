@@ -31,6 +31,8 @@ from slipkit.export.detector_graph import (
 from slipkit.export.registry import (
     DEFAULT_OPSET,
     ExportError,
+    RuntimeSteps,
+    StreamContext,
 )
 from slipkit.physics.fsr import rest_voltage
 
@@ -479,3 +481,31 @@ def fsr_press_sign_step(detector: FSRTouchSlip) -> dict[str, Any]:
     if detector._polarity != "per_recording":
         step["sign"] = int(detector._sign)
     return step
+
+
+def fsr_runtime_steps(det: FSRTouchSlip, ctx: StreamContext) -> RuntimeSteps:
+    """A voltage-input detector: the ``press_sign`` step on the gripper PC.
+
+    The runtime takes each stream's rest level from its first samples, as the batch
+    detector does per recording, so a stream of the other wiring is never touched;
+    with training wirings of both signs the press direction is latched at its first
+    press too. The graph reads the sign-normalised signal.
+    """
+    del ctx
+    if det.input != "voltage":
+        return RuntimeSteps()
+    step = fsr_press_sign_step(det)
+    sign = (
+        f"wiring sign (its first block mean further than {step['delta']:g} V "
+        "from rest), as the detector's per-recording polarity"
+        if "sign" not in step
+        else f"the fitted polarity's sign ({det.polarity_})"
+    )
+    return RuntimeSteps(
+        steps=[step],
+        notes=[
+            "press_sign: the stream's rest level (mean of its first "
+            f"{det.rest_samples} samples) and {sign}, latched on the gripper "
+            "PC; start the loop (or reset it) at rest before each grasp"
+        ],
+    )

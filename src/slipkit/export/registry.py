@@ -227,6 +227,77 @@ def registered() -> dict[type, Exporter]:
     return dict(_EXPORTERS)
 
 
+@dataclass(frozen=True)
+class StreamContext:
+    """What a stream detector's runtime-steps hook may read at export.
+
+    Attributes
+    ----------
+    stream : str
+        The stream the detector reads.
+    channels : list of str
+        Its channels, in the graph's order.
+    train_ids : list
+        The run's training trials (not held out).
+    held : list
+        The held-out trials (:class:`slipkit.export.deploy.HeldOutTrial`).
+    frames : callable
+        ``frames(trial_ids)`` -> the trials' raw frames (as ``held``).
+    """
+
+    stream: str
+    channels: list[str]
+    train_ids: list[Any]
+    held: list[Any]
+    frames: Callable[[list[Any]], list[Any]]
+
+
+@dataclass
+class RuntimeSteps:
+    """What the runtime must do around a detector's graph, and what the bundle deploys.
+
+    Attributes
+    ----------
+    steps : list of dict
+        Preprocessing steps of the runtime's op registry, in order.
+    notes : list of str
+        Lines for the bundle's notes (what a user must know on the gripper PC).
+    model : estimator or None
+        The estimator the graph is exported from when it differs from the trained one
+        (e.g. a fixed baseline instead of a per-recording one); None: the trained one.
+    """
+
+    steps: list[dict[str, Any]] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    model: Any = None
+
+
+RuntimeStepsHook = Callable[[Any, StreamContext], RuntimeSteps]
+
+_RUNTIME_STEPS: Registry[type, RuntimeStepsHook] = Registry(
+    "runtime steps", error=ExportError, n_args=2, key_type=type
+)
+
+
+def register_runtime_steps(
+    cls: type, fn: RuntimeStepsHook, *, overwrite: bool = False
+) -> None:
+    """Register ``fn(detector, context) -> RuntimeSteps`` for a stream detector class.
+
+    An exporter whose graph needs steps outside it (a rest level latched on the
+    gripper PC, a fixed baseline) registers them here beside the graph, as
+    sklearn-onnx registers a shape calculator with a converter, so the deployer asks
+    the detector's class instead of testing it. Subclasses inherit the entry.
+    """
+    _RUNTIME_STEPS.register(cls, fn, overwrite=overwrite)
+
+
+def runtime_steps(detector: Any, context: StreamContext) -> RuntimeSteps:
+    """The registered steps of ``detector``'s class (nearest base), or none."""
+    hook = _RUNTIME_STEPS.for_class(type(detector))
+    return RuntimeSteps() if hook is None else hook(detector, context)
+
+
 def _qualified(obj: Any) -> str:
     return (
         f"{getattr(obj, '__module__', '?')}.{getattr(obj, '__qualname__', repr(obj))}"
