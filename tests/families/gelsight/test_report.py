@@ -62,3 +62,26 @@ def test_the_clip_length_control_reads_what_a_streaming_detector_must_not() -> N
         inner=2,
     )
     assert r["balanced_accuracy"] == 1.0
+
+
+def test_learned_detectors_score_frames_after_arming_and_separate_drift_from_shakes() -> (
+    None
+):
+    from slipkit.families.gelsight.detectors import (
+        TacTipVelocityDetector,
+        WindowModelDetector,
+    )
+
+    trials, y, g = _data({True: 80, False: 80})
+    for make in (
+        lambda: WindowModelDetector(C=1.0, window=25, arm=12),
+        lambda: TacTipVelocityDetector(C=1.0, smooth=10, arm=12),
+    ):
+        det = make().fit(trials, y)
+        s = det.frame_scores(trials[0])
+        assert np.isnan(s[:12]).all()
+        assert np.isfinite(s[30:]).all()
+        r = evaluate(
+            Candidate("d", (("", make),)), trials, y, g, seed=0, outer=3, inner=2
+        )
+        assert r["balanced_accuracy"] >= 0.75

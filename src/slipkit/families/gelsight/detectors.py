@@ -37,7 +37,12 @@ from sklearn.preprocessing import StandardScaler
 from sklearn.svm import SVC
 
 from slipkit.errors import SlipkitError
-from slipkit.families.gelsight.features import FEATURES, to_points, trial_features
+from slipkit.families.gelsight.features import (
+    FEATURES,
+    pitch_of,
+    to_points,
+    trial_features,
+)
 from slipkit.features.pins import velocity_features
 from slipkit.models.svm import TacTipSVM
 
@@ -277,8 +282,6 @@ class TacTipVelocityDetector(_Detector):
         rows = np.full((len(pts), pts.shape[1] * 2), np.nan)
         if len(pts) <= self.arm + 1:
             return rows
-        from slipkit.families.gelsight.features import pitch_of
-
         p = pts[self.arm :] / pitch_of(pts[self.arm])
         rows[self.arm + 1 :] = velocity_features(np.diff(p, axis=0))
         return rows
