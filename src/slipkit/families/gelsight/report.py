@@ -200,6 +200,12 @@ def evaluate(
     }
 
 
+def _nan_stat(fn: Callable[..., Any], values: Sequence[float]) -> float:
+    """``fn`` over the finite values (NaN when there are none: e.g. no alarm at all)."""
+    v = np.asarray(values, dtype=np.float64)
+    return float(fn(v)) if np.isfinite(v).any() else math.nan
+
+
 def run(
     dataset: Dataset, seeds: Sequence[int], names: Sequence[str] | None = None
 ) -> dict[str, Any]:
@@ -223,8 +229,8 @@ def run(
             "kind": cand.kind,
             **{
                 k: {
-                    "mean": float(np.nanmean([r[k] for r in per_seed])),
-                    "sd": float(np.nanstd([r[k] for r in per_seed])),
+                    "mean": _nan_stat(np.nanmean, [r[k] for r in per_seed]),
+                    "sd": _nan_stat(np.nanstd, [r[k] for r in per_seed]),
                 }
                 for k in keys
             },
