@@ -51,13 +51,14 @@ class Candidate:
     kind: str = "detector"  # or "control"
 
 
-def candidates(seed: int) -> list[Candidate]:
-    """Every detector and control of the report, with their settings."""
+def candidates(seed: int, arm: int = 12) -> list[Candidate]:
+    """Every detector and control of the report, with their settings (the streaming
+    detectors armed ``arm`` frames into a recording)."""
     return [
         Candidate(
             "pin_motion",
             tuple(
-                (f"{q} w{w}", partial(PinMotionDetector, quantity=q, window=w))
+                (f"{q} w{w}", partial(PinMotionDetector, quantity=q, window=w, arm=arm))
                 for q in PinMotionDetector.QUANTITIES
                 for w in (25, 50)
             ),
@@ -67,7 +68,9 @@ def candidates(seed: int) -> list[Candidate]:
             tuple(
                 (
                     f"C{c} w{w} top{top}",
-                    partial(WindowModelDetector, C=c, window=w, top=top, seed=seed),
+                    partial(
+                        WindowModelDetector, C=c, window=w, top=top, arm=arm, seed=seed
+                    ),
                 )
                 for c in (0.01, 1.0)
                 for w in (25, 50)
@@ -82,6 +85,7 @@ def candidates(seed: int) -> list[Candidate]:
                     partial(
                         WindowModelDetector,
                         model="svm",
+                        arm=arm,
                         C=c,
                         window=w,
                         step=10,
@@ -97,7 +101,14 @@ def candidates(seed: int) -> list[Candidate]:
             tuple(
                 (
                     f"C{c} smooth{k}",
-                    partial(TacTipVelocityDetector, C=c, smooth=k, step=10, seed=seed),
+                    partial(
+                        TacTipVelocityDetector,
+                        C=c,
+                        smooth=k,
+                        step=10,
+                        arm=arm,
+                        seed=seed,
+                    ),
                 )
                 for c in (1.0,)
                 for k in (10, 25)
@@ -207,7 +218,11 @@ def _nan_stat(fn: Callable[..., Any], values: Sequence[float]) -> float:
 
 
 def run(
-    dataset: Dataset, seeds: Sequence[int], names: Sequence[str] | None = None
+    dataset: Dataset,
+    seeds: Sequence[int],
+    names: Sequence[str] | None = None,
+    *,
+    arm: int = 12,
 ) -> dict[str, Any]:
     """Every detector and control over ``seeds``: per-seed results and mean / sd."""
     trials, y, g, _ = load_trials(dataset)
@@ -217,12 +232,12 @@ def run(
         "objects": len(set(g)),
     }
     rows: dict[str, Any] = {}
-    for cand in candidates(0):
+    for cand in candidates(0, arm):
         if names and cand.name not in names:
             continue
         per_seed = []
         for seed in seeds:
-            c = next(c for c in candidates(seed) if c.name == cand.name)
+            c = next(c for c in candidates(seed, arm) if c.name == cand.name)
             per_seed.append(evaluate(c, trials, y, g, seed=seed))
         keys = [k for k in per_seed[0] if k != "chosen"]
         rows[cand.name] = {
@@ -261,12 +276,18 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--only", nargs="*", help="detector names (default: all)")
     ap.add_argument("--out", help="write the results as JSON here")
+    ap.add_argument(
+        "--arm",
+        type=int,
+        default=12,
+        help="frames before the detectors are armed (12: 0.5 s)",
+    )
     args = ap.parse_args(argv)
     print(
         "| detector | kind | balanced accuracy | slip recall | wiggle false alarms | first alarm (frame) |"
     )
     print("|---|---|---|---|---|---|")
-    res = run(load_dataset(args.dataset), args.seeds, args.only)
+    res = run(load_dataset(args.dataset), args.seeds, args.only, arm=args.arm)
     if args.out:
         out = Path(args.out)
         tmp = out.with_suffix(out.suffix + ".tmp")
