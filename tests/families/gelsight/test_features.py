@@ -111,3 +111,10 @@ def test_onnx_graph_scores_as_the_detector() -> None:
     got = sess.run(None, {graph.input_name: wins})[0]
     want = det.decision_function(x.astype(np.float32).astype(np.float64))[9:]
     assert np.allclose(got, want, rtol=1e-5, atol=1e-6)
+
+
+def test_divergence_detector_refuses_odd_channels_and_too_short_recordings() -> None:
+    with pytest.raises(ValueError, match="even number of channels"):
+        PinDivergenceDetector(window=3).fit(np.zeros((10, 7)), np.zeros(10))
+    with pytest.raises(ValueError, match="window of 25 frames"):
+        PinDivergenceDetector(window=25).fit(_swelling(n=10), np.zeros(10))

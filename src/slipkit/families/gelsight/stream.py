@@ -106,6 +106,15 @@ class PinDivergenceDetector(StreamDetector):
         self.window = window
         self.quantile = quantile
 
+    def _check_X(self, X: Any, *, reset: bool) -> FloatArray:
+        Xv = super()._check_X(X, reset=reset)
+        if Xv.shape[1] % 2 or Xv.shape[1] < 6:
+            raise ValueError(
+                "PinDivergenceDetector reads pin frames x_0..x_{K-1}, y_0..y_{K-1} (an "
+                f"even number of channels, K >= 3 pins); X has {Xv.shape[1]}"
+            )
+        return Xv
+
     def _scores(self, X: FloatArray) -> FloatArray:
         w = int(self.window)
         out = np.full(len(X), -np.inf)
@@ -117,6 +126,11 @@ class PinDivergenceDetector(StreamDetector):
     def _calibrate(
         self, X: FloatArray, y: NDArray[np.int_], scores: FloatArray, segments: Any
     ) -> None:
+        if self.threshold is None and not np.isfinite(scores).any():
+            raise ValueError(
+                f"no recording reaches the window of {int(self.window)} frames: no score "
+                "to choose a threshold on"
+            )
         if self.threshold is None and len(np.unique(y)) < 2:
             finite = scores[np.isfinite(scores)]
             q = float(np.quantile(finite, self.quantile)) if len(finite) else 0.0
