@@ -252,6 +252,7 @@ def test_slipkit_run_cli_replays_the_bundle(
         ("fsr", 0.5),
         ("sliptack", 1.0),
         ("davis", 10.0),
+        ("gelsight", 40.0),
     ],
 )
 def test_budget_is_a_tenth_of_the_sensors_frame_period(
@@ -267,7 +268,7 @@ def test_budget_is_a_tenth_of_the_sensors_frame_period(
 def test_unknown_sensor_has_no_budget() -> None:
     """A sensor no configs/deploy file lists is a clear error."""
     with pytest.raises(SlipkitError, match="no configs/deploy"):
-        deploy_config(_compose("export", ["run=x"]), "gelsight")
+        deploy_config(_compose("export", ["run=x"]), "no_such_sensor")
 
 
 def test_explicit_deploy_choice_overrides_the_sensor() -> None:

@@ -168,12 +168,23 @@ FAMILIES: dict[str, Family] = {
             scenario="davis",
             docs=("simulation/davis.md", "baselines/davis.md"),
         ),
+        Family(
+            name="gelsight",
+            sensor="gelsight",
+            tasks=(_DETECT,),
+            deploys=(_DETECT,),
+            compares=(_DETECT,),
+            exporters=("slipkit.families.gelsight.export",),
+            docs=("families/gelsight.md",),
+        ),
     )
 }
 
 #: modules of family folders (``slipkit/families/<name>/``) whose import registers their
 #: plug-ins, by kind; the stage that owns the kind imports them by name
-PLUGIN_MODULES: dict[str, tuple[str, ...]] = {"exporters": ()}
+PLUGIN_MODULES: dict[str, tuple[str, ...]] = {
+    "exporters": ("slipkit.families.gelsight.export",)
+}
 
 
 def resolve(ref: str) -> Any:

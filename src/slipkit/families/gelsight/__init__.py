@@ -1,0 +1,1 @@
+"""The GelSight family: marker tracking, pin-motion features, streaming detectors."""

@@ -1,0 +1,299 @@
+"""Per-trial scores of the GelSight detectors and controls, split by object (nested CV).
+
+``python -m slipkit.families.gelsight.report <imported dataset> [--seeds 0 1 2]``
+
+For each seed the objects are dealt into ``outer`` folds (group k-fold, shuffled by the
+seed). For each outer fold, every candidate setting of a detector is scored on the
+training side by an inner group k-fold (``inner`` folds): out-of-fold trial scores, the
+threshold of best balanced accuracy on them (:func:`~slipkit.families.gelsight.detectors.choose_threshold`),
+and that balanced accuracy. The best setting is refitted on the whole training side,
+its threshold taken from the out-of-fold scores, and the held-out objects' trials are
+scored once. Per seed the held-out trials of all folds are pooled: balanced accuracy
+(trial = slip when the detector ever fires), slip recall, wiggle false-alarm rate and
+the frame of first alarm; the table gives mean and sd over seeds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from sklearn.model_selection import GroupKFold
+
+from slipkit.data.dataset import Dataset
+from slipkit.families.gelsight.detectors import (
+    ClipLengthControl,
+    FirstFramesControl,
+    MajorityControl,
+    PinMotionDetector,
+    TacTipVelocityDetector,
+    Trial,
+    WindowModelDetector,
+    choose_threshold,
+)
+
+Factory = Callable[[], Any]
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A detector and the settings its inner CV chooses among."""
+
+    name: str
+    settings: tuple[tuple[str, Factory], ...]
+    kind: str = "detector"  # or "control"
+
+
+def candidates(seed: int, arm: int = 12) -> list[Candidate]:
+    """Every detector and control of the report, with their settings (the streaming
+    detectors armed ``arm`` frames into a recording)."""
+    return [
+        Candidate(
+            "pin_motion",
+            tuple(
+                (f"{q} w{w}", partial(PinMotionDetector, quantity=q, window=w, arm=arm))
+                for q in PinMotionDetector.QUANTITIES
+                for w in (25, 50)
+            ),
+        ),
+        Candidate(
+            "window_logistic",
+            tuple(
+                (
+                    f"C{c} w{w} top{top}",
+                    partial(
+                        WindowModelDetector, C=c, window=w, top=top, arm=arm, seed=seed
+                    ),
+                )
+                for c in (0.01, 1.0)
+                for w in (25, 50)
+                for top in (1.0, 0.1)
+            ),
+        ),
+        Candidate(
+            "window_svm",
+            tuple(
+                (
+                    f"C{c} w{w}",
+                    partial(
+                        WindowModelDetector,
+                        model="svm",
+                        arm=arm,
+                        C=c,
+                        window=w,
+                        step=10,
+                        seed=seed,
+                    ),
+                )
+                for c in (0.3, 3.0)
+                for w in (50,)
+            ),
+        ),
+        Candidate(
+            "tactip_svm",
+            tuple(
+                (
+                    f"C{c} smooth{k}",
+                    partial(
+                        TacTipVelocityDetector,
+                        C=c,
+                        smooth=k,
+                        step=10,
+                        arm=arm,
+                        seed=seed,
+                    ),
+                )
+                for c in (1.0,)
+                for k in (10, 25)
+            ),
+        ),
+        Candidate("clip_length", (("", ClipLengthControl),), "control"),
+        Candidate("first_frames", (("", FirstFramesControl),), "control"),
+        Candidate("majority", (("", MajorityControl),), "control"),
+    ]
+
+
+def load_trials(
+    dataset: Dataset,
+) -> tuple[list[Trial], np.ndarray, np.ndarray, list[str]]:
+    """Trials (fingertip -> pin rows), labels, groups and ids of an imported dataset."""
+    streams = sorted(dataset.streams)
+    trials: list[Trial] = []
+    ys: list[int] = []
+    groups: list[str] = []
+    ids: list[str] = []
+    for trial in dataset:
+        trials.append(
+            {
+                s: trial.streams[s][list(dataset.streams[s].channels)].to_numpy(
+                    np.float64
+                )
+                for s in streams
+            }
+        )
+        ys.append(int(trial.labels["slipped"]))
+        groups.append(str(trial.meta["object"]))
+        ids.append(trial.trial_id)
+    return trials, np.asarray(ys), np.asarray(groups), ids
+
+
+def _oof_scores(
+    factory: Factory,
+    trials: Sequence[Trial],
+    y: np.ndarray,
+    g: np.ndarray,
+    folds: int,
+    seed: int,
+) -> np.ndarray:
+    out = np.empty(len(trials))
+    cv = GroupKFold(n_splits=min(folds, len(set(g))), shuffle=True, random_state=seed)
+    for tr, te in cv.split(np.zeros(len(y)), y, g):
+        det = factory().fit([trials[i] for i in tr], y[tr])
+        out[te] = [det.trial_score(trials[i]) for i in te]
+    return out
+
+
+def _ba(fired: np.ndarray, y: np.ndarray) -> float:
+    return float((fired[y == 1].mean() + (~fired[y == 0]).mean()) / 2)
+
+
+def evaluate(
+    cand: Candidate,
+    trials: Sequence[Trial],
+    y: np.ndarray,
+    g: np.ndarray,
+    *,
+    seed: int,
+    outer: int = 5,
+    inner: int = 4,
+) -> dict[str, Any]:
+    """Nested group CV of one detector for one seed (see the module doc)."""
+    fired = np.zeros(len(y), dtype=bool)
+    first = np.full(len(y), np.nan)
+    chosen: list[str] = []
+    cv = GroupKFold(n_splits=outer, shuffle=True, random_state=seed)
+    for tr, te in cv.split(np.zeros(len(y)), y, g):
+        best: tuple[float, str, Factory, float] | None = None
+        for label, factory in cand.settings:
+            s = _oof_scores(factory, [trials[i] for i in tr], y[tr], g[tr], inner, seed)
+            thr = choose_threshold(s.tolist(), y[tr].tolist())
+            ba = _ba(s >= thr, y[tr])
+            if best is None or ba > best[0]:
+                best = (ba, label, factory, thr)
+        assert best is not None
+        _, label, factory, thr = best
+        det = factory().fit([trials[i] for i in tr], y[tr])
+        det.threshold_ = thr
+        chosen.append(label)
+        for i in te:
+            a = det.alarm(trials[i])
+            fired[i] = a is not None
+            first[i] = np.nan if a is None else a
+    slip, wig = y == 1, y == 0
+    return {
+        "balanced_accuracy": _ba(fired, y),
+        "slip_recall": float(fired[slip].mean()),
+        "wiggle_false_alarm": float(fired[wig].mean()),
+        "first_alarm_frame_slip": float(np.nanmedian(first[slip & fired]))
+        if (slip & fired).any()
+        else math.nan,
+        "first_alarm_frame_wiggle": float(np.nanmedian(first[wig & fired]))
+        if (wig & fired).any()
+        else math.nan,
+        "chosen": chosen,
+    }
+
+
+def _nan_stat(fn: Callable[..., Any], values: Sequence[float]) -> float:
+    """``fn`` over the finite values (NaN when there are none: e.g. no alarm at all)."""
+    v = np.asarray(values, dtype=np.float64)
+    return float(fn(v)) if np.isfinite(v).any() else math.nan
+
+
+def run(
+    dataset: Dataset,
+    seeds: Sequence[int],
+    names: Sequence[str] | None = None,
+    *,
+    arm: int = 12,
+) -> dict[str, Any]:
+    """Every detector and control over ``seeds``: per-seed results and mean / sd."""
+    trials, y, g, _ = load_trials(dataset)
+    out: dict[str, Any] = {
+        "trials": len(y),
+        "slip": int(y.sum()),
+        "objects": len(set(g)),
+    }
+    rows: dict[str, Any] = {}
+    for cand in candidates(0, arm):
+        if names and cand.name not in names:
+            continue
+        per_seed = []
+        for seed in seeds:
+            c = next(c for c in candidates(seed, arm) if c.name == cand.name)
+            per_seed.append(evaluate(c, trials, y, g, seed=seed))
+        keys = [k for k in per_seed[0] if k != "chosen"]
+        rows[cand.name] = {
+            "kind": cand.kind,
+            **{
+                k: {
+                    "mean": _nan_stat(np.nanmean, [r[k] for r in per_seed]),
+                    "sd": _nan_stat(np.nanstd, [r[k] for r in per_seed]),
+                }
+                for k in keys
+            },
+            "per_seed": per_seed,
+        }
+        print(_row(cand.name, rows[cand.name]), flush=True)
+    out["results"] = rows
+    return out
+
+
+def _row(name: str, r: dict[str, Any]) -> str:
+    def ms(k: str, d: int = 2) -> str:
+        return f"{r[k]['mean']:.{d}f} +- {r[k]['sd']:.{d}f}"
+
+    return (
+        f"| {name} | {r['kind']} | {ms('balanced_accuracy')} | {ms('slip_recall')} | "
+        f"{ms('wiggle_false_alarm')} | {r['first_alarm_frame_slip']['mean']:.0f} |"
+    )
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    from slipkit.data.io import load_dataset
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument(
+        "dataset", help="a dataset folder written by slipkit import source=gelsight"
+    )
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    ap.add_argument("--only", nargs="*", help="detector names (default: all)")
+    ap.add_argument("--out", help="write the results as JSON here")
+    ap.add_argument(
+        "--arm",
+        type=int,
+        default=12,
+        help="frames before the detectors are armed (12: 0.5 s)",
+    )
+    args = ap.parse_args(argv)
+    print(
+        "| detector | kind | balanced accuracy | slip recall | wiggle false alarms | first alarm (frame) |"
+    )
+    print("|---|---|---|---|---|---|")
+    res = run(load_dataset(args.dataset), args.seeds, args.only, arm=args.arm)
+    if args.out:
+        out = Path(args.out)
+        tmp = out.with_suffix(out.suffix + ".tmp")
+        tmp.write_text(json.dumps(res, indent=2))
+        tmp.replace(out)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()
