@@ -112,6 +112,18 @@ def _table(rows: list[tuple[str, Any]], head: tuple[str, str]) -> list[str]:
     return lines
 
 
+def _estimator(model: Any) -> str:
+    """The estimator's class, with a pipeline's steps: ``Pipeline(scaler, clf)``."""
+    cls = type(model)
+    steps = getattr(model, "steps", None)
+    inner = (
+        "(" + ", ".join(type(step).__name__ for _, step in steps) + ")"
+        if isinstance(steps, list)
+        else ""
+    )
+    return f"`{cls.__name__}{inner}` (`{cls.__module__}`)"
+
+
 def data_source(provenance: Mapping[str, Any]) -> dict[str, Any]:
     """Where the data came from: ``kind`` (simulated / imported / not recorded), name,
     licence and citation, the known-source table filling what the provenance lacks."""
@@ -177,13 +189,22 @@ def _split(metrics: Mapping[str, Any], task_cfg: Mapping[str, Any]) -> dict[str,
         "test_size": task_cfg.get("test_size"),
         "train_groups": sp.get("train_objects"),
         "test_groups": sp.get("test_objects"),
+        "fold_groups": sp.get("test_groups"),
     }
 
 
 def _controls(metrics: Mapping[str, Any]) -> list[tuple[str, Any]]:
     """The run's controls (first frame, dynamics only, majority class, ...) as rows."""
     rows: list[tuple[str, Any]] = []
+    in_blocks = {
+        f"{name}_accuracy"
+        for key in ("controls", "controls_test")
+        if isinstance(metrics.get(key), Mapping)
+        for name in metrics[key]
+    }
     for key, value in metrics.items():
+        if key in in_blocks:
+            continue  # the same figure as its block's entry below
         if key.startswith(("first_frame", "dynamics", "majority")):
             if isinstance(value, int | float) and not isinstance(value, bool):
                 rows.append((key, value))
@@ -221,6 +242,12 @@ def _seen(dataset: Any, split: Mapping[str, Any]) -> list[str]:
     cols = [c for c in dict.fromkeys([*dataset.groups, *_SEEN_COLUMNS]) if c in trials]
     labels = set(getattr(dataset, "labels", {}) or {})
     lines = []
+    if split["train"] is None and split["train_groups"] is not None:
+        lines.append(
+            f"`{split['group'] or 'group'}` seen in training: "
+            f"{_listing(split['train_groups'])}; held out: {_listing(split['test_groups'] or [])}"
+        )
+        cols = [c for c in cols if c != split["group"]]
     for col in cols:
         if col in labels:
             continue
@@ -241,8 +268,15 @@ def _seen(dataset: Any, split: Mapping[str, Any]) -> list[str]:
         elif numeric:
             lines.append(f"`{col}` in the dataset {_range(trials[col])}")
         else:
+            folds = split["fold_groups"] if col == split["group"] else None
             lines.append(
                 f"`{col}` in the dataset: {_listing(sorted(set(trials[col].astype(str))))}"
+                + (
+                    f"; the {len(folds)} outer folds hold out "
+                    + " | ".join(_listing(f, 6) for f in folds)
+                    if isinstance(folds, list) and folds
+                    else ""
+                )
             )
     return lines
 
@@ -312,8 +346,8 @@ def model_card(
     lines += [
         "## Model",
         "",
-        f"- Estimator: `{_short_class(str(info.get('model', '')))}` "
-        f"(`{info.get('model', NOT_RECORDED)}`), {kind}",
+        f"- Estimator: {_estimator(run.model)} (config `{info.get('model', NOT_RECORDED)}`), "
+        f"{kind}",
         f"- Task: `{_short_class(str(info.get('task', '')))}`; experiment "
         f"`{info.get('name') or NOT_RECORDED}`; sensor family `{dataset.sensor}`",
         f"- Predicts: {predicts}",
@@ -395,10 +429,15 @@ def model_card(
         + f"; {sizes}"
         + (
             f"; test_size {_fmt(split['test_size'])}"
-            if split["test_size"] is not None
+            if split["test_size"] is not None and not split["folds"]
             else ""
         )
-        + f"; run seed {_fmt(info.get('seed'))}, data seed {_fmt(ds_info.get('seed'))}"
+        + f"; run seed {_fmt(info.get('seed'))}"
+        + (
+            f", simulation seed {_fmt(src['seed'])}"
+            if src["kind"] == "simulated"
+            else ""
+        )
     )
     lines.append(
         f"- Model choice: {cv + (', k=' + str(validation['k']) if validation.get('k') else '') if cv else NOT_RECORDED}"
@@ -414,7 +453,7 @@ def model_card(
         "## Held-out metrics",
         "",
         f"Scored on: {training.get('scored_on') or NOT_RECORDED}"
-        + ("" if held is not False else " (refit on all data: not held out)")
+        + ("" if held is not False else "; the saved model was then refit on all data")
         + (f"; test trials {_listing(split['test'], 6)}" if split["test"] else "")
         + ".",
         "",
@@ -524,7 +563,9 @@ def model_card(
     lines += [f"- {line}" for line in _seen(dataset, split)]
     if held is False:
         lines.append(
-            "- The saved model was refit on all data: the metrics above are not held out"
+            "- The saved model was refit on all data after it was scored: the metrics "
+            "above are those of the models scored on held-out data before the refit, "
+            "not of this model on unseen data"
         )
     lines.append(
         f"- Replay in the bundle: {training.get('replay', {}).get('note') or NOT_RECORDED}"
