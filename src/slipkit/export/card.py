@@ -176,7 +176,11 @@ def _split(metrics: Mapping[str, Any], task_cfg: Mapping[str, Any]) -> dict[str,
     sp = metrics.get("split") if isinstance(metrics.get("split"), Mapping) else {}
     assert isinstance(sp, Mapping)
     by = sp.get("by") or metrics.get("split_by") or task_cfg.get("split")
-    group = task_cfg.get("group") or (by if by not in (None, "trial") else None)
+    if by is None and isinstance(sp.get("block_s"), int | float):
+        by = f"time blocks of {sp['block_s']:g} s"
+    group = task_cfg.get("group") or (
+        sp.get("by") if sp.get("by") not in (None, "trial") else None
+    )
     train, test = _ids(sp.get("train")), _ids(sp.get("test"))
     return {
         "by": by,
@@ -190,6 +194,12 @@ def _split(metrics: Mapping[str, Any], task_cfg: Mapping[str, Any]) -> dict[str,
         "train_groups": sp.get("train_objects"),
         "test_groups": sp.get("test_objects"),
         "fold_groups": sp.get("test_groups"),
+        # counts per side in other units (time blocks, frames)
+        "counts": {
+            unit: counts
+            for unit in ("blocks", "frames")
+            if isinstance(counts := sp.get(unit), Mapping)
+        },
     }
 
 
@@ -406,6 +416,11 @@ def model_card(
     sizes = (
         f"{_fmt(split['n_train'])} training / {_fmt(split['n_test'])} test trials"
         if split["n_train"] is not None
+        else "; ".join(
+            f"{unit}: " + ", ".join(f"{side} {n}" for side, n in counts.items())
+            for unit, counts in split["counts"].items()
+        )
+        if split["counts"] and split["n_test"] is None
         else f"{_fmt(split['n_test'])} test trials"
         + (f" over {split['folds']} outer folds" if split["folds"] else "")
     )
