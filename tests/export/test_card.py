@@ -4,15 +4,17 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from types import SimpleNamespace
 
 import onnxruntime
 import pytest
 from hydra import compose, initialize_config_dir
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
+from tests.strategies import make_dataset
 
 from slipkit import config_dir
 from slipkit.data.importers import biotacsp_dos, bts3v2
-from slipkit.export.card import NOT_RECORDED, cpu_model, data_source
+from slipkit.export.card import NOT_RECORDED, cpu_model, data_source, model_card
 from slipkit.export.commands import export_main
 from slipkit.runtime import BundleError, load_bundle
 from slipkit.runtime.bundle import CARD_FILE
@@ -167,3 +169,81 @@ def test_licence_and_citation_of_known_sources() -> None:
     )
     assert (None, None) == (own["license"], own["citation"])
     assert NOT_RECORDED == data_source({})["kind"]
+
+
+def _fake_run(metrics: dict, tmp_path: Path, **task: str) -> SimpleNamespace:
+    """What model_card reads of a run folder: run.json, metrics.json, config, the model."""
+    return SimpleNamespace(
+        path=tmp_path / "run",
+        info={"model": "pkg.Model", "task": "pkg.Task", "name": "exp", "seed": 3},
+        metrics=metrics,
+        config=OmegaConf.create({"task": task}),
+        model=object(),
+    )
+
+
+def test_card_of_an_imported_dataset_states_what_is_missing(tmp_path: Path) -> None:
+    """A recording without licence in its provenance gets the known source's; what no
+    source holds is "not recorded"; the objects never seen in training are counted."""
+    dataset = make_dataset(n_trials=6, n_objects=6, with_events=False)
+    dataset.provenance = {
+        "importer": "slipkit.data.importers.biotacsp_dos.read_biotacsp_dos"
+    }
+    ids = [str(t) for t in dataset.trial_ids]
+    metrics = {
+        "split": {"by": "object", "train": ids[:4], "test": ids[4:]},
+        "test": {"accuracy": 0.75, "recall": {"linear": 0.5}, "confusion": [[1]]},
+        "controls": {"majority": {"window": {"accuracy": 0.5}}},
+        "majority_accuracy": 0.5,
+    }
+    manifest = {
+        "name": "b",
+        "frame": {"streams": ["force"], "channels": ["fx"], "rate_hz": 300.0},
+        "decision": {"rule": "argmax", "classes": ["a", "b"], "slip_classes": ["b"]},
+        "training": {"scored_on": "the run's held-out test split", "held_out": True},
+    }
+    card = model_card(
+        manifest,
+        _fake_run(metrics, tmp_path, group="object"),
+        dataset,
+        kind="learned",
+        latency=None,
+        latency_note="none",
+        debounce_from="the task's default",
+        model_sha256="0" * 64,
+    )
+    assert f"- Licence: {biotacsp_dos.LICENSE}" in card
+    assert f"- Citation: {biotacsp_dos.CITATION}" in card
+    assert f"recordings of one source ({biotacsp_dos.SOURCE})" in card
+    assert "simulated" not in card
+    assert "| accuracy | 0.75 |" in card
+    assert "| recall.linear | 0.5 |" in card
+    assert "| controls.majority.accuracy | 0.5 |" in card
+    assert "majority_accuracy" not in card  # the same figure as the block's
+    assert "(group column `object`); 4 training / 2 test trials" in card
+    assert "held out: obj4, obj5 (2 never seen in training)" in card
+    assert f"- Operating point chosen by: {NOT_RECORDED}" in card
+    assert f"- Loop p50 / p99: {NOT_RECORDED}" in card
+    assert f"- Budget: frame period {NOT_RECORDED}, p99 <= {NOT_RECORDED}" in card
+
+
+def test_card_of_a_time_block_split(tmp_path: Path) -> None:
+    metrics = {
+        "split": {
+            "block_s": 4.0,
+            "blocks": {"train": 6, "val": 2, "test": 2},
+            "frames": {"train": 2400, "val": 800, "test": 800},
+        },
+    }
+    card = model_card(
+        {"name": "f", "frame": {}, "decision": {}, "training": {}},
+        _fake_run(metrics, tmp_path),
+        make_dataset(n_trials=2, with_events=False),
+        kind="learned",
+        latency=None,
+        latency_note="none",
+        debounce_from="x",
+        model_sha256="0" * 64,
+    )
+    assert "- Split: by time blocks of 4 s; blocks: train 6, val 2, test 2;" in card
+    assert f"Test metrics: {NOT_RECORDED}." in card

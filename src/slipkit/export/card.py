@@ -74,6 +74,11 @@ def _fmt(value: Any) -> str:
     return str(value)
 
 
+def _unit(value: Any, unit: str) -> str:
+    """``value unit``, or "not recorded" without the unit."""
+    return NOT_RECORDED if value is None else f"{_fmt(value)} {unit}"
+
+
 def _listing(values: Iterable[Any], limit: int = _MAX_VALUES) -> str:
     items = [str(v) for v in values]
     if not items:
@@ -382,11 +387,11 @@ def model_card(
         "",
         f"- Streams: {_listing(streams)} ({_listing(rates) if rates else 'rate ' + NOT_RECORDED})",
         f"- Channels ({len(frame.get('channels') or [])}): {_listing(frame.get('channels') or [], 8)}",
-        f"- Frame shape {frame.get('shape')}, {_fmt(frame.get('rate_hz'))} Hz; window "
+        f"- Frame shape {frame.get('shape') or NOT_RECORDED}, {_unit(frame.get('rate_hz'), 'Hz')}; window "
         f"{_fmt(frame.get('window'))} frames, decision every {_fmt(frame.get('hop'))}",
         f"- Preprocessing: {_listing(ops) if ops else 'none (the graph takes the window)'}",
-        f"- Budget: frame period {_fmt(budget.get('frame_period'))} ms, p99 <= "
-        f"{_fmt(budget.get('p99'))} ms (from {budget.get('source') or NOT_RECORDED})",
+        f"- Budget: frame period {_unit(budget.get('frame_period'), 'ms')}, p99 <= "
+        f"{_unit(budget.get('p99'), 'ms')} (from {budget.get('source') or NOT_RECORDED})",
         "",
     ]
 
@@ -543,7 +548,7 @@ def model_card(
         lines.append(
             f"- Loop p50 {_fmt(1e3 * float(latency['p50_ms']))} us, p99 "
             f"{_fmt(1e3 * float(latency['p99_ms']))} us per decision against the budget p99 "
-            f"{_fmt(budget.get('p99'))} ms"
+            f"{_unit(budget.get('p99'), 'ms')}"
         )
     else:
         lines.append(f"- Loop p50 / p99: {NOT_RECORDED}")
@@ -559,8 +564,8 @@ def model_card(
     lines += ["## Intended use and limits", ""]
     lines.append(
         f"- Intended use: {'slip decisions' if classes else 'a thresholded estimate'} from a "
-        f"`{dataset.sensor}` sensor streaming {_listing(streams)} at "
-        f"{_fmt(frame.get('rate_hz'))} Hz, the channel layout above"
+        f"`{dataset.sensor}` sensor streaming {_listing(streams) if streams else NOT_RECORDED} "
+        f"at {_unit(frame.get('rate_hz'), 'Hz')}, the channel layout above"
     )
     if src["kind"] == "simulated":
         lines.append(
