@@ -21,12 +21,14 @@ over every held-out trial as one stream with gaps against the model
 measure the session options on the replay frames
 (:func:`slipkit.runtime.choose_session`); write the bundle
 atomically with :func:`slipkit.runtime.write_bundle` (which reloads it before the
-final rename; ``sign_key``: with ``manifest.hmac``); print a summary and the bundle
+final rename; ``sign_key``: with ``manifest.hmac``) with its model card
+(``MODEL_CARD.md``, :mod:`slipkit.export.card`); print a summary and the bundle
 folder last.
 """
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import tempfile
@@ -481,8 +483,9 @@ def export_main(cfg: DictConfig) -> Path:
     stream_check = stream_state and not isinstance(graph, StepGraph)
     stream_report: dict[str, Any] | None = None
     rows: list[dict[str, Any]] = []
+    sess_cfg = cfg.get("session") or {}
+    max_frames = int(sess_cfg.get("max_frames", 500))
     if choose or stream_check:
-        sess_cfg = cfg.get("session") or {}
         with tempfile.TemporaryDirectory(prefix="slipkit-export-") as tmp:
             probe = write_bundle(
                 Path(tmp) / "bundle",
@@ -504,7 +507,7 @@ def export_main(cfg: DictConfig) -> Path:
                     frames,
                     times,
                     rounds=int(sess_cfg.get("rounds", 3)),
-                    max_frames=int(sess_cfg.get("max_frames", 500)),
+                    max_frames=max_frames,
                 )
         if rows:
             manifest["session"] = rows[0]["session"]
@@ -512,6 +515,16 @@ def export_main(cfg: DictConfig) -> Path:
                 f"measured: {rows[0]['session']} (loop p50 {rows[0]['p50_ms'] * 1e3:.1f} us, "
                 f"p99 {rows[0]['p99_ms'] * 1e3:.1f} us)"
             )
+    card = _card(
+        cfg,
+        manifest,
+        run,
+        dataset,
+        rows,
+        model_bytes,
+        min(len(frames), max_frames),
+        regression=dep.regression,
+    )
     write_bundle(
         out,
         model_bytes,
@@ -520,6 +533,7 @@ def export_main(cfg: DictConfig) -> Path:
         overwrite=bool(cfg.get("overwrite", False)),
         prepare=prepare_bytes,
         key=key,
+        card=card,
     )
     print(
         f"{name}: {type(model).__name__} ({type(task).__name__}) -> ONNX opset "
@@ -567,6 +581,62 @@ def export_main(cfg: DictConfig) -> Path:
         print(f"  signed: manifest.hmac (HMAC-SHA256 under {cfg.sign_key})")
     print(out)
     return out
+
+
+def _card(
+    cfg: DictConfig,
+    manifest: Mapping[str, Any],
+    run: Any,
+    dataset: Any,
+    rows: list[dict[str, Any]],
+    model_bytes: bytes,
+    n_frames: int,
+    *,
+    regression: Mapping[str, Any] | None,
+) -> str:
+    """The bundle's ``MODEL_CARD.md`` (:func:`slipkit.export.card.model_card`)."""
+    from slipkit._files import sha256_bytes
+    from slipkit.export.card import model_card
+
+    # a class's own slipkit_kind tag (as slipkit compare reads it), else its package
+    cls = type(run.model)
+    tag = getattr(cls, "slipkit_kind", None)
+    kind = (
+        str(tag)
+        if tag in ("analytic", "learned")
+        else "analytic"
+        if cls.__module__.startswith("slipkit.baselines.")
+        else "learned"
+    )
+    rounds = int((cfg.get("session") or {}).get("rounds", 3))
+    latency = {**rows[0], "frames": n_frames, "rounds": rounds} if rows else None
+    note = (
+        f"at export, the loop over the first {n_frames} replay frames back to back, "
+        f"median of {rounds} round(s), session {json.dumps(rows[0]['session'])}"
+        if rows
+        else "the export measured no latency (choose_session=false)"
+        if not cfg.get("choose_session", True)
+        else "the replay made no decision to time"
+    )
+    if cfg.get("debounce_k") is not None:
+        debounce_from = f"set at export (debounce_k={cfg.debounce_k})"
+    elif (run.metrics.get("operating_point") or {}).get("debounce_k") is not None:
+        debounce_from = "the run's operating point"
+    else:
+        debounce_from = "the task's default (the run records no operating point)"
+    return model_card(
+        manifest,
+        run,
+        dataset,
+        kind=kind,
+        latency=latency,
+        latency_note=note,
+        debounce_from=debounce_from,
+        model_sha256=sha256_bytes(model_bytes),
+        threshold_from=None
+        if regression is None or "threshold" not in regression
+        else "set at export (regression.threshold)",
+    )
 
 
 def _names(cfg: DictConfig, key: str) -> list[str] | None:

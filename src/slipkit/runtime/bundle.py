@@ -1,4 +1,4 @@
-"""The bundle format: ``exports/<name>/`` = ``model.onnx`` + ``manifest.json`` (+ ``replay.npz``).
+"""The bundle format: ``exports/<name>/`` = ``model.onnx`` + ``manifest.json`` (+ ``replay.npz``, ``MODEL_CARD.md``).
 
 A bundle is everything a gripper PC needs to decide slip from raw sensor frames: the
 ONNX graph, the numpy preprocessing the graph does not hold (a closed registry of
@@ -90,6 +90,11 @@ newest frame is done one frame early, and the decision frame's latency holds onl
 rest (the SlipTack speed graph: the spectrum of the window with its newest sample held,
 ``docs/deploy.md``, "SlipTack: a prepared spectrum"). Not with ``state`` or
 ``preprocessing`` steps (a stateful step would see every window twice).
+
+Model card (optional ``MODEL_CARD.md``, :data:`CARD_FILE`, no version bump): Markdown
+that ``slipkit export`` writes (:mod:`slipkit.export.card`), listed in ``files`` and so
+checked like the graph; :meth:`Bundle.card` returns its text, None for a bundle
+without one.
 """
 
 from __future__ import annotations
@@ -173,6 +178,11 @@ TOP_FIELDS = (
 )
 #: The prepare graph's file (manifest ``prepare``).
 PREPARE_FILE = "prepare.onnx"
+#: The model card ``slipkit export`` writes beside the manifest (Markdown, listed in
+#: ``files``); a bundle without one still loads.
+CARD_FILE = "MODEL_CARD.md"
+#: Largest model card :meth:`Bundle.card` reads.
+MAX_CARD_BYTES = 1 << 20
 #: Most recurrent state tensors (``state`` entries) a bundle may carry.
 MAX_STATE = 8
 #: dtypes a state tensor may have (the loop keeps it in a numpy buffer of that dtype).
@@ -989,6 +999,45 @@ class Bundle:
         )
         return replace(self, session=sess, session_spec=spec, prepare_session=prep)
 
+    def card(self) -> str | None:
+        """The model card's text (``MODEL_CARD.md``), or None when the bundle has none.
+
+        The file is checked against its sha256 in ``files`` again as it is read.
+
+        Raises
+        ------
+        BundleError
+            The card changed since the bundle was loaded, is too large or is not UTF-8.
+        """
+        digest = self.manifest.files.get(CARD_FILE)
+        if digest is None:
+            return None
+        fpath = self.path / CARD_FILE
+        try:
+            size = fpath.stat().st_size
+            if size > MAX_CARD_BYTES:
+                raise BundleError(
+                    str(fpath), None, f"is {size} bytes; at most {MAX_CARD_BYTES}"
+                )
+            data = fpath.read_bytes()
+        except OSError as exc:
+            raise BundleError(
+                str(fpath), None, f"cannot be read: {exc.strerror or exc}"
+            ) from None
+        if sha256_bytes(data) != digest:
+            raise BundleError(
+                str(fpath),
+                None,
+                f"sha256 does not match {MANIFEST_FILE} field 'files.{CARD_FILE}': "
+                "the card changed after the bundle was written; re-export it",
+            )
+        try:
+            return data.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise BundleError(
+                str(fpath), None, f"is not UTF-8 text (byte {exc.start})"
+            ) from None
+
 
 def _one_line(exc: BaseException) -> str:
     """An exception's message on one line (onnxruntime's span several)."""
@@ -1627,6 +1676,7 @@ def write_bundle(
     overwrite: bool = False,
     prepare: bytes | None = None,
     key: bytes | None = None,
+    card: str | None = None,
 ) -> Path:
     """Write a bundle atomically: a temporary sibling folder, checked, then renamed.
 
@@ -1653,6 +1703,9 @@ def write_bundle(
     key : bytes, optional
         Sign the bundle: ``manifest.hmac`` holds :func:`manifest_hmac` of the
         written ``manifest.json`` under this key.
+    card : str, optional
+        The model card, written as ``MODEL_CARD.md`` (:data:`CARD_FILE`) and listed
+        in ``files`` like the graph.
 
     Returns
     -------
@@ -1705,6 +1758,10 @@ def write_bundle(
             )
             np.savez(tmp / REPLAY_FILE, frames=frames, timestamps=times)
             man["files"][REPLAY_FILE] = sha256_file(tmp / REPLAY_FILE)
+        if card is not None:
+            data = card.encode("utf-8")
+            (tmp / CARD_FILE).write_bytes(data)
+            man["files"][CARD_FILE] = sha256_bytes(data)
         # The digest last, over the final content (files included).
         man = sign_manifest(man)
         text = json.dumps(man, indent=2) + "\n"

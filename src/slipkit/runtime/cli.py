@@ -9,6 +9,7 @@ Usage::
     slipkit-run exports/tactip_svm --udp 127.0.0.1:9000 --wait 0 --timeout 5
     slipkit-run exports/tactip_svm --choose-session      # measure session options
     slipkit-run exports/tactip_svm --key ~/lab.key       # refuse an unsigned or edited bundle
+    slipkit-run exports/tactip_svm --card                # print its model card (MODEL_CARD.md)
     slipkit-run exports/sliptack --cpus 1 --realtime     # affinity, SCHED_FIFO, GC, threads
     slipkit-run exports/tactip_svm --udp 0.0.0.0:9000 --send 192.168.1.20:9100 --jsonl
     slipkit-run exports/tactip_svm --lsl TacTip --lsl-out SlipDecisions
@@ -37,6 +38,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -53,13 +55,14 @@ from slipkit.runtime.budget import (
     pacing_spins,
 )
 from slipkit.runtime.bundle import (
+    CARD_FILE,
     DEFAULT_DEADLINE_S,
     MAX_DEADLINE_S,
     Bundle,
     load_bundle,
     read_key,
 )
-from slipkit.runtime.errors import FrameError, OptionError
+from slipkit.runtime.errors import BundleError, FrameError, OptionError
 from slipkit.runtime.hand import (
     MAX_SPIN_US,
     MODES,
@@ -88,6 +91,9 @@ from slipkit.runtime.sources import (
     load_replay,
 )
 from slipkit.runtime.tuning import MAX_ROUNDS, choose_session
+
+#: Characters ``--card`` does not print as they are: C0 / C1 controls but tab and newline.
+_CONTROL = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f]")
 
 #: ``format`` of the summary ``--json`` writes: an existing file at ``--json`` is replaced
 #: only when it is such a summary (:func:`is_summary`)
@@ -291,6 +297,13 @@ def _parser() -> argparse.ArgumentParser:
         help="measure session option sets on the replay frames, print them fastest first, and exit",
     )
     p.add_argument(
+        "--card",
+        action="store_true",
+        help="print the bundle's model card (MODEL_CARD.md: training data, licence, "
+        "held-out metrics, operating point, latency) once the bundle has loaded and "
+        "passed its checks, and exit",
+    )
+    p.add_argument(
         "--rounds",
         type=int,
         default=3,
@@ -459,6 +472,7 @@ def _check_args(args: argparse.Namespace) -> None:
             ("--udp", args.udp),
             ("--lsl", args.lsl),
             ("--choose-session", args.choose_session or None),
+            ("--card", args.card or None),
         ):
             if given is not None:
                 raise OptionError(
@@ -666,6 +680,19 @@ def run(argv: Sequence[str] | None = None) -> int:
         return _finish(args, out, status)
     rt_opts = _realtime_options(args)
     bundle = load_bundle(args.bundle, deadline_s=args.load_deadline, key=args.key_bytes)
+    if args.card:
+        card = bundle.card()
+        if card is None:
+            raise BundleError(
+                str(Path(args.bundle) / CARD_FILE),
+                None,
+                "is missing: this bundle was written without a model card; "
+                "re-export it with slipkit export to add one",
+            )
+        # control characters (a terminal's escape sequences) printed as \\xNN
+        text = _CONTROL.sub(lambda m: f"\\x{ord(m.group()):02x}", card)
+        sys.stdout.write(text if text.endswith("\n") else text + "\n")
+        return 0
     if rt_opts.pin_threads:
         bundle = bundle.with_session(pinned_session(bundle.session_spec, rt_opts))
     if args.choose_session:
