@@ -191,12 +191,12 @@ CHILD = textwrap.dedent(
         io.save_dataset(make_dataset(n_trials=3, n_frames=20, seed=1), target,
                         overwrite=kind == "overwrite")
     else:
-        from slipkit.runtime import bundle
+        from slipkit.runtime import bundle_write
         from tests.runtime.helpers import linear_graph, manifest
         # The replay's checksum is taken after model.onnx and replay.npz are written
         # and before manifest.json is.
-        bundle.sha256_file = stall(bundle.sha256_file, 1)
-        bundle.write_bundle(target, linear_graph(np.ones(12), 0.0), manifest(12),
+        bundle_write.sha256_file = stall(bundle_write.sha256_file, 1)
+        bundle_write.write_bundle(target, linear_graph(np.ones(12), 0.0), manifest(12),
                             replay=(np.zeros((10, 3)), np.arange(10) / 100.0))
     """
 )
