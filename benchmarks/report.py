@@ -65,7 +65,7 @@ BENCHMARKS: tuple[Bench, ...] = (
         "runtime_loop",
         "Runtime loop overhead",
         "benchmarks/bench_runtime_loop.py",
-        ("--frames", "1000", "--repeats", "3"),
+        ("--frames", "3000", "--repeats", "5"),
         "The full per-frame loop of `slipkit.runtime.StreamLoop` (ring buffer, numpy "
         "preprocessing, onnxruntime call, rule, debounce) against a bare `session.run` on "
         "three random-weight graphs (FSR linear, BioTac MLP, TacTip 1128-SV RBF SVM).",
@@ -74,7 +74,7 @@ BENCHMARKS: tuple[Bench, ...] = (
         "sinks",
         "Decision sinks",
         "benchmarks/bench_sinks.py",
-        ("--frames", "1000", "--repeats", "3"),
+        ("--frames", "3000", "--repeats", "5"),
         "The same three test bundles through the loop with and without a UDP decision "
         "sink: what sending each decision out costs.",
     ),
@@ -82,7 +82,7 @@ BENCHMARKS: tuple[Bench, ...] = (
         "export_svm",
         "TacTip SVM export",
         "benchmarks/bench_export_svm.py",
-        ("--trials", "20", "--frames", "200", "--repeats", "3"),
+        ("--trials", "20", "--frames", "300", "--repeats", "5"),
         "The TacTip RBF SVM per frame, batch 1, one thread: scikit-learn native, "
         "skl2onnx's `SVMClassifier`, slipkit's graph in onnxruntime, numpy matmul and "
         "the onnxruntime per-call floor.",
@@ -91,7 +91,7 @@ BENCHMARKS: tuple[Bench, ...] = (
         "press_sign",
         "FSR press_sign op",
         "benchmarks/bench_press_sign.py",
-        ("--calls", "2000"),
+        ("--calls", "5000"),
         "Cost per loop call of the runtime op `press_sign` (FSR per-recording "
         "polarity) before and after its latch.",
     ),
@@ -99,7 +99,7 @@ BENCHMARKS: tuple[Bench, ...] = (
         "deploy",
         "Exported models against native",
         "benchmarks/bench_deploy.py",
-        ("--rounds", "3", "--frames", "500"),
+        ("--rounds", "3", "--frames", "2000"),
         "Per learned family, a small trained run exported to a bundle: the slipkit loop, "
         "the bare onnxruntime call, the native model (scikit-learn / torch) and the floor "
         "(Identity call + the graph's FLOPs at numpy's matmul rate), batch 1, one thread.",
@@ -108,7 +108,7 @@ BENCHMARKS: tuple[Bench, ...] = (
         "load",
         "Deadlines under load",
         "benchmarks/bench_load.py",
-        ("--frames", "2000"),
+        ("--frames", "6000"),
         "Each family's bundle replayed quiet and beside one busy process per core, "
         "real-time options off and on (`--cpus 0 --realtime`): latency p99 against the "
         "bundle's budget.",
@@ -117,7 +117,7 @@ BENCHMARKS: tuple[Bench, ...] = (
         "cold_start",
         "Cold start",
         "benchmarks/bench_cold_start.py",
-        ("--repeats", "3"),
+        ("--repeats", "5"),
         "`slipkit-run` from process start to the first decision, per test bundle, beside "
         "the bare interpreter and the runtime's imports (this venv's python, not a "
         "runtime-only one).",
@@ -126,7 +126,7 @@ BENCHMARKS: tuple[Bench, ...] = (
         "simulate",
         "Simulator speed",
         "benchmarks/bench_simulate.py",
-        ("--trials", "3", "--repeats", "1"),
+        ("--trials", "10", "--repeats", "3"),
         "Samples and frames per second that each scene config of `configs/scene/` "
         "generates on one core.",
     ),
@@ -134,7 +134,7 @@ BENCHMARKS: tuple[Bench, ...] = (
         "baselines",
         "Analytic baselines",
         "benchmarks/bench_baselines.py",
-        ("--trials", "2", "--repeats", "2"),
+        ("--trials", "4", "--repeats", "3"),
         "Compute per decision of the FSR and BioTac analytic detectors, batch beside "
         "streaming, with the papers' published times.",
     ),
@@ -142,7 +142,7 @@ BENCHMARKS: tuple[Bench, ...] = (
         "baselines_sliptack_davis",
         "SlipTack and DAVIS baselines",
         "benchmarks/bench_baselines_sliptack_davis.py",
-        ("--trials", "2", "--repeats", "2"),
+        ("--trials", "3", "--repeats", "2"),
         "Compute per decision of the SlipTack and DAVIS baselines, batch beside "
         "streaming, against the sensors' frame periods.",
     ),
@@ -261,8 +261,8 @@ def render(
         f"Every table on this page comes from one run of `{command}`"
         + (" (`make bench-report`)," if command == COMMAND else ","),
         "each benchmark a subprocess, one at a time, with the settings named in its section",
-        "(smaller than the scripts' defaults, to keep the page to about ten minutes on two",
-        "cores). Ratios measured side by side in one run are what matter: absolute times",
+        "(the scripts' defaults but for fewer rounds of `bench_deploy.py`, to keep the page",
+        "to about ten minutes on two cores). Ratios measured side by side in one run are what matter: absolute times",
         "depend on the machine and on its load, so each section gives the 1-minute load",
         "average before and after its benchmark.",
         "",
