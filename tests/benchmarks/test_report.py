@@ -71,6 +71,7 @@ def test_page_structure_and_header(report: ModuleType, fake_root: Path) -> None:
         "numpy",
         "onnxruntime",
         "scikit-learn",
+        "load average (1 min)",
         "git commit",
         "date (UTC)",
     ):
@@ -162,3 +163,28 @@ def test_slug_matches_the_anchors_the_docs_link(report: ModuleType) -> None:
     assert len(names) == len(set(names))
     for b in report.BENCHMARKS:
         assert (ROOT / b.script).is_file(), b.script
+
+
+def test_timeout_ends_the_benchmark_and_its_children(
+    report: ModuleType, tmp_path: Path
+) -> None:
+    pid_file = tmp_path / "child.pid"
+    (tmp_path / "hang.py").write_text(
+        "import subprocess, sys, time\n"
+        "child = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(120)'])\n"
+        f"open({str(pid_file)!r}, 'w').write(str(child.pid))\n"
+        "print('started', flush=True)\n"
+        "time.sleep(120)\n"
+    )
+    benches = (report.Bench("hang", "Hangs", "hang.py", (), "Never ends."),)
+    out = tmp_path / "page.md"
+    rc = report.main(["--out", str(out), "--timeout", "5"], benches, tmp_path)
+    assert rc == 1
+    page = out.read_text()
+    assert "**Failed:** timed out after 5 s" in page
+    if pid_file.exists():  # on a very slow machine the script may not get that far
+        assert "started" in page
+        child = int(pid_file.read_text())
+        # Killed with its parent's session: gone, or a zombie left for init to reap.
+        stat = Path(f"/proc/{child}/stat")
+        assert not stat.exists() or stat.read_text().split(")")[-1].split()[0] == "Z"
