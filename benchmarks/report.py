@@ -345,7 +345,9 @@ def main(
         metavar="NAME",
         help="run only these benchmarks (names below)",
     )
-    ap.add_argument("--out", type=Path, default=DEFAULT_OUT, help="the page to write")
+    ap.add_argument(
+        "--out", type=Path, default=None, help="the page to write (docs/benchmarks.md)"
+    )
     ap.add_argument("--timeout", type=float, default=TIMEOUT_S, help="per benchmark, s")
     ap.epilog = "benchmarks: " + ", ".join(b.name for b in benchmarks)
     args = ap.parse_args(argv)
@@ -358,10 +360,13 @@ def main(
                 f"--only: unknown benchmark {', '.join(unknown)} (known: {ap.epilog[12:]})"
             )
         chosen = [b for b in benchmarks if b.name in args.only]
-    out = args.out if args.out.is_absolute() else root / args.out
+    out = root / DEFAULT_OUT if args.out is None else args.out
     if out.exists() and (not out.is_file() or not _is_ours(out)):
         # Checked before any benchmark runs, and again at the write.
-        print(f"report.py: {out} was not written by benchmarks/report.py; not replaced")
+        print(
+            f"report.py: {out} was not written by benchmarks/report.py; not replaced",
+            file=sys.stderr,
+        )
         return 2
     argv_list = list(sys.argv[1:] if argv is None else argv)
     command = " ".join([COMMAND, *argv_list])
