@@ -7,7 +7,7 @@ STAMP  := $(VENV)/.installed
 TORCH  := torch==2.13.0
 
 .DEFAULT_GOAL := help
-.PHONY: help install demo test test-full lint docs bench wheel wheelhouse clean
+.PHONY: help install demo test test-full lint docs bench bench-report wheel wheelhouse clean
 
 help: ## list the targets
 	@grep -E '^[a-z-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "} {printf "  %-10s %s\n", $$1, $$2}'
@@ -47,6 +47,9 @@ docs: $(STAMP) ## build the docs site (user guide + API reference) into site/
 
 bench: $(STAMP) ## run the benchmarks in benchmarks/
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
+
+bench-report: $(STAMP) ## run the benchmarks' short settings and rewrite docs/benchmarks.md
+	$(BIN)/python benchmarks/report.py
 
 wheel: $(STAMP) ## build dist/slipkit-<version>-py3-none-any.whl (pure Python)
 	$(BIN)/python -m pip wheel --quiet --no-deps --no-build-isolation -w dist .
