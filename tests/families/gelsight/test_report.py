@@ -85,3 +85,26 @@ def test_learned_detectors_score_frames_after_arming_and_separate_drift_from_sha
             Candidate("d", (("", make),)), trials, y, g, seed=0, outer=3, inner=2
         )
         assert r["balanced_accuracy"] >= 0.75
+
+
+def _field(n: int, scale: np.ndarray, shift: np.ndarray) -> dict[str, np.ndarray]:
+    """A 5x5 pin grid (pitch 30 px) scaled about its centre by ``scale[t]`` and moved
+    along x by ``shift[t]``."""
+    xs, ys = np.meshgrid(np.arange(5) * 30.0, np.arange(5) * 30.0)
+    p = np.column_stack([xs.ravel(), ys.ravel()])
+    c = p.mean(axis=0)
+    pts = c + (p - c)[None] * scale[:, None, None]
+    pts[..., 0] += shift[:, None]
+    return {"camera_0": np.concatenate([pts[..., 0], pts[..., 1]], axis=1)}
+
+
+def test_divergence_per_path_ranks_a_spreading_field_above_a_larger_shake() -> None:
+    t = np.arange(80.0)
+    # spreading by 1.5 % over 2 s with no net motion, against a shake of 4 px that
+    # also spreads and contracts the field by 3 %
+    spread = _field(80, 1 + 0.0003 * np.clip(t - 20, 0, None), np.zeros(80))
+    shake = _field(80, 1 + 0.03 * np.abs(np.sin(t / 3)), 4.0 * np.sin(t / 3))
+    per_path = PinMotionDetector(quantity="divergence_per_path", window=50)
+    plain = PinMotionDetector(quantity="divergence", window=50)
+    assert per_path.trial_score(spread) > per_path.trial_score(shake)
+    assert plain.trial_score(spread) < plain.trial_score(shake)

@@ -10,7 +10,10 @@ and a trial counts as slip when it ever fires. ``threshold_`` is chosen by
 
 * :class:`PinMotionDetector` -- analytic: one pin-field quantity over the window
   (``divergence``: |divergence|; ``steady``: translation x straightness, the net drift
-  of the field; ``residual``: the non-affine part).
+  of the field; ``residual``: the non-affine part; ``divergence_per_path``: |divergence|
+  over the field's path length in the window, floored at :data:`MIN_PATH` pitches: the
+  gel spreading or contracting for its motion, which a shake that moves the field far
+  and returns does little of).
 * :class:`WindowModelDetector` -- logistic regression (or an RBF SVM) on the window's
   deformation features (:mod:`slipkit.families.gelsight.features`); training frames
   carry their trial's label, weighted so each trial and class counts once.
@@ -51,6 +54,10 @@ Trial = Mapping[str, FloatArray]
 
 #: the features a learned window model reads, and the transform before scaling
 _SIGNED = {"divergence", "curl"}
+
+#: path floor (marker pitches) of ``divergence_per_path``: a field that barely moves
+#: (tracking jitter is ~0.01 pitch) must not reach a large ratio
+MIN_PATH = 0.02
 
 
 def choose_threshold(scores: Sequence[float], y: Sequence[int]) -> float:
@@ -134,7 +141,7 @@ class _Detector:
 class PinMotionDetector(_Detector):
     """Analytic: ``quantity`` of the pin field over the window (see the module doc)."""
 
-    QUANTITIES = ("divergence", "steady", "residual")
+    QUANTITIES = ("divergence", "steady", "residual", "divergence_per_path")
 
     def __init__(
         self, *, quantity: str = "divergence", window: int = 50, arm: int = 12
@@ -153,6 +160,8 @@ class PinMotionDetector(_Detector):
             return np.abs(col["divergence"])
         if self.quantity == "steady":
             return col["translation"] * col["straightness"]
+        if self.quantity == "divergence_per_path":
+            return np.abs(col["divergence"]) / np.maximum(col["path"], MIN_PATH)
         return col["residual"]
 
 
