@@ -122,7 +122,10 @@ def test_fast_alignment_catches_the_fast_slips_the_slow_one_drops(
             int(fast.false_alarm.sum()),
             int(fast.dropped.sum()),
         ),
-        (int((slow.condition == 20.0).sum()), int(slow[slow.condition == 20.0].dropped.sum())),
+        (
+            int((slow.condition == 20.0).sum()),
+            int(slow[slow.condition == 20.0].dropped.sum()),
+        ),
     )
     assert int(slow.dropped.sum()) >= 3  # and one of the two at 11.8 mm/s
 
