@@ -1,13 +1,19 @@
-"""The DAVIS onset rule as a tiny graph on the filtered areas, and its deployment.
+"""Exporter and deployment of the DAVIS onset rule (:mod:`slipkit.baselines.davis_onset`).
 
-As the polarity rule (:mod:`slipkit.export.davis`): the runtime's ``davis_areas`` op
-gives each event frame's filtered positive and negative areas (ONNX has no connected
-components) and the graph holds the decision, here
-:func:`slipkit.baselines.davis_onset.onset_score`:
-``min(pos - min_pos_px + 0.5, neg_ratio pos - neg + 0.5)`` > 0 is slip.
-:class:`DavisOnsetAreaRule` is that score as a scikit-learn classifier on ``(pos, neg)``
-rows, for the export parity check; :func:`deploy_davis_onset` is the deployer's branch for
-:class:`~slipkit.baselines.davis_onset.DavisOnset` runs.
+The whole rule fits in one graph on the runtime's event frame (counts per pixel,
+``(batch, 2, H, W)``, positive then negative), no preprocessing op:
+
+1. ``fired = frame > 0``; the fired 8-neighbours per pixel as a ``Conv`` with a 3 x 3
+   kernel of ones and a zero centre (float32: exact small integers); kept pixels
+   ``fired & neighbours >= min_neighbours``;
+2. in float64: the kept areas per polarity (``ReduceSum``) and, from the kept positive
+   pixels' row and column sums (``MatMul`` with the pixel coordinates), their
+   covariance and its ``curl``;
+3. the score :func:`~slipkit.baselines.davis_onset.onset_score`: > 0 is slip.
+
+:class:`DavisOnsetScores` is the estimator side of the parity check (the detector's
+numpy features and score on runtime frames); the deployer checks those features equal
+the detector's own (``DavisOnset.frames`` on the events) on every held-out frame.
 """
 
 from __future__ import annotations
@@ -21,7 +27,7 @@ from onnx import helper
 from sklearn.base import BaseEstimator, ClassifierMixin
 from sklearn.utils.validation import check_is_fitted
 
-from slipkit.baselines.davis_onset import onset_score
+from slipkit.baselines.davis_onset import NEIGHBOURS, DavisOnset
 from slipkit.export._graph import DOUBLE, FLOAT, GraphBuilder
 from slipkit.export.registry import (
     DEFAULT_OPSET,
@@ -30,87 +36,128 @@ from slipkit.export.registry import (
     register_exporter,
 )
 
-INPUT = "areas"
+INPUT = "event_frame"
 SCORE = "score"
 
 
-class DavisOnsetAreaRule(ClassifierMixin, BaseEstimator):
-    """:func:`~slipkit.baselines.davis_onset.onset_score` on ``(pos, neg)`` rows (px).
+class DavisOnsetScores(ClassifierMixin, BaseEstimator):
+    """A :class:`DavisOnset` scoring runtime event frames ``(n, 2, H, W)``.
 
     Parameters
     ----------
-    min_pos_px : int
-        Smallest filtered positive area of a slip frame (px).
-    neg_ratio : float
-        Largest negative area per px of positive area (a binary fraction such as 0.25
-        keeps the graph's arithmetic exact).
+    detector : DavisOnset
+        Fitted.
     """
 
-    def __init__(self, min_pos_px: int = 8, neg_ratio: float = 0.25) -> None:
-        self.min_pos_px = min_pos_px
-        self.neg_ratio = neg_ratio
+    def __init__(self, *, detector: DavisOnset) -> None:
+        self.detector = detector
 
     def fit(
         self, X: ArrayLike | None = None, y: ArrayLike | None = None
-    ) -> DavisOnsetAreaRule:
-        """Nothing to learn: record the classes."""
+    ) -> DavisOnsetScores:
+        """Check the detector is fitted (no data used)."""
         del X, y
+        check_is_fitted(self.detector, "classes_")
         self.classes_ = np.array([0, 1])
-        self.n_features_in_ = 2
         return self
 
-    def decision_function(self, X: ArrayLike) -> NDArray[np.float64]:
-        """The onset score (px): > 0 is slip."""
-        check_is_fitted(self, "classes_")
-        a = np.asarray(X, dtype=np.float64).reshape(-1, 2)
-        return onset_score(
-            a[:, 0],
-            a[:, 1],
-            min_pos_px=int(self.min_pos_px),
-            neg_ratio=float(self.neg_ratio),
+    def _frames(self, frames: ArrayLike) -> NDArray[np.float64]:
+        d = self.detector
+        return np.asarray(frames, dtype=np.float64).reshape(
+            -1, 2, int(d.height_px), int(d.width_px)
         )
 
-    def predict(self, X: ArrayLike) -> NDArray[np.int_]:
+    def features(self, frames: ArrayLike) -> NDArray[np.float64]:
+        """The detector's features of event frames."""
+        return self.detector.features(self._frames(frames))
+
+    def decision_function(self, frames: ArrayLike) -> NDArray[np.float64]:
+        """The onset score per frame: > 0 is slip."""
+        check_is_fitted(self, "classes_")
+        return self.detector.score(self.features(frames))
+
+    def predict(self, frames: ArrayLike) -> NDArray[np.int_]:
         """1 (slip) where the score is > 0, else 0."""
-        return (self.decision_function(X) > 0).astype(int)
+        return (self.decision_function(frames) > 0).astype(int)
 
 
-def export_davis_onset_rule(
-    estimator: DavisOnsetAreaRule, *, opset: int = DEFAULT_OPSET
+def export_davis_onset(
+    scores: DavisOnsetScores, *, opset: int = DEFAULT_OPSET
 ) -> ExportedGraph:
-    """Export :class:`DavisOnsetAreaRule`: two float64 ``Gemm`` rows and a ``Min``.
+    """Export :class:`DavisOnsetScores` (module docstring).
 
     Returns
     -------
     ExportedGraph
-        Input ``"areas"`` ``(batch, 2)`` float32 (filtered positive, negative area,
-        px), output ``"score"`` ``(batch,)``: the rule's decision function.
+        Input ``"event_frame"`` ``(batch, 2, H, W)`` float32 (counts per pixel), output
+        ``"score"`` ``(batch,)``: the onset score, > 0 is slip.
     """
-    check_is_fitted(estimator, "classes_")
+    check_is_fitted(scores, "classes_")
+    d = scores.detector
+    h, w = int(d.height_px), int(d.width_px)
     g = GraphBuilder("davis_onset_rule", opset)
-    x = g.op("Cast", INPUT, to=DOUBLE)
-    a = g.op(
-        "Gemm",
-        x,
-        g.const([[1.0], [0.0]], np.float64),
-        g.const([0.5 - float(estimator.min_pos_px)], np.float64),
-        stem="pos",
+    fired = g.op("Cast", g.op("Greater", INPUT, g.const(0.0)), to=FLOAT)
+    flat = g.op("Reshape", fired, g.const([-1, 1, h, w], np.int64))
+    count = g.op(
+        "Conv", flat, g.const(NEIGHBOURS[None, None]), pads=[1, 1, 1, 1], stem="nb"
     )
-    b = g.op(
-        "Gemm",
-        x,
-        g.const([[float(estimator.neg_ratio)], [-1.0]], np.float64),
-        g.const([0.5], np.float64),
-        stem="one_sided",
+    enough = g.op(
+        "Cast", g.op("Greater", count, g.const(d.min_neighbours - 0.5)), to=FLOAT
     )
-    out = g.op("Cast", g.op("Min", a, b), to=FLOAT)
+    keep32 = g.op(
+        "Reshape", g.op("Mul", flat, enough), g.const([-1, 2, h, w], np.int64)
+    )
+    keep = g.op("Cast", keep32, to=DOUBLE, stem="keep")
+    areas = g.op("ReduceSum", keep, g.const([2, 3], np.int64), keepdims=0)  # (b, 2)
+
+    def col(i: int) -> str:
+        return g.op("Slice", areas, *(g.const([v], np.int64) for v in (i, i + 1, 1)))
+
+    pos_area, neg_area = col(0), col(1)  # (b, 1)
+    pos = g.op(
+        "Squeeze",
+        g.op("Slice", keep, *(g.const([v], np.int64) for v in (0, 1, 1))),
+        g.const([1], np.int64),
+    )  # (b, H, W)
+    x = np.arange(w, dtype=np.float64)[:, None]
+    y = np.arange(h, dtype=np.float64)[:, None]
+    rows = g.op("ReduceSum", pos, g.const([2], np.int64), keepdims=0)  # (b, H)
+    cols = g.op("ReduceSum", pos, g.const([1], np.int64), keepdims=0)  # (b, W)
+    n = g.op("Max", pos_area, g.const([1.0], np.float64))
+
+    def mean(a: str, v: NDArray[np.float64]) -> str:
+        return g.op("Div", g.op("MatMul", a, g.const(v, np.float64)), n)
+
+    mx, my = mean(cols, x), mean(rows, y)
+    vx = g.op("Sub", mean(cols, x * x), g.op("Mul", mx, mx))
+    vy = g.op("Sub", mean(rows, y * y), g.op("Mul", my, my))
+    px = g.op(
+        "Squeeze", g.op("MatMul", pos, g.const(x, np.float64)), g.const([2], np.int64)
+    )
+    cxy = g.op("Sub", mean(px, y), g.op("Mul", mx, my))
+    det_c = g.op("Sub", g.op("Mul", vx, vy), g.op("Mul", cxy, cxy))
+    root = g.op("Sqrt", g.op("Max", det_c, g.const([0.0], np.float64)))
+    curl = g.op("Div", g.op("Mul", root, g.const([12.0], np.float64)), n, stem="curl")
+    half = g.const([0.5], np.float64)
+    t1 = g.op("Add", pos_area, g.const([0.5 - float(d.min_pos_px)], np.float64))
+    t2 = g.op(
+        "Add",
+        g.op(
+            "Sub",
+            g.op("Mul", pos_area, g.const([float(d.neg_ratio)], np.float64)),
+            neg_area,
+        ),
+        half,
+    )
+    t3 = g.op("Sub", g.const([float(d.max_curl)], np.float64), curl)
+    out = g.op("Cast", g.op("Min", t1, t2, t3), to=FLOAT)
     g.nodes.append(helper.make_node("Reshape", [out, g.const([-1], np.int64)], [SCORE]))
     model = g.build(
-        [helper.make_tensor_value_info(INPUT, FLOAT, ["batch", 2])],
+        [helper.make_tensor_value_info(INPUT, FLOAT, ["batch", 2, h, w])],
         [helper.make_tensor_value_info(SCORE, FLOAT, ["batch"])],
         doc=(
-            f"DAVIS onset rule: min(pos - {estimator.min_pos_px} + 0.5, "
-            f"{estimator.neg_ratio} pos - neg + 0.5) > 0 is slip"
+            f"DAVIS onset rule: min(pos - {d.min_pos_px} + 0.5, {d.neg_ratio:g} pos - "
+            f"neg + 0.5, {d.max_curl:g} - curl) > 0 is slip"
         ),
     )
     import sklearn
@@ -118,53 +165,84 @@ def export_davis_onset_rule(
     return ExportedGraph(
         model=model,
         input_name=INPUT,
-        input_shape=("batch", 2),
+        input_shape=("batch", 2, h, w),
         output_names=(SCORE,),
         score_output=SCORE,
-        score_meaning="DavisOnsetAreaRule.decision_function: > 0 is slip (px)",
+        score_meaning="DavisOnsetScores.decision_function: > 0 is slip",
         score_method="decision_function",
         opset=g.opset,
-        classes=tuple(str(c) for c in estimator.classes_),
+        classes=("0", "1"),
         threshold=0.0,
-        input_meaning="filtered positive and negative event areas of one event frame (px)",
+        input_meaning="one event frame, counts per pixel, positive then negative",
         producers=producers(**{"scikit-learn": sklearn.__version__}),
     )
 
 
-register_exporter(DavisOnsetAreaRule, export_davis_onset_rule)
+register_exporter(DavisOnsetScores, export_davis_onset)
 
 
 def deploy_davis_onset(
     task: Any, run: Any, dataset: Any, options: Mapping[str, Any]
 ) -> Any:
-    """A :class:`~slipkit.baselines.davis_onset.DavisOnset` run's deployment.
+    """A :class:`DavisOnset` run's deployment: event frames in, the whole rule in the graph.
 
-    The polarity rule's (``davis_areas`` op, its areas checked equal to the detector's
-    on every held-out frame) with the onset rule's graph and frame; debounce from the
-    options (default 2: a loss of contact that lasts two frames).
+    Frame = one ``frame_s`` event frame as counts per pixel, ``(2, height_px,
+    width_px)``, window 1, hop 1, at ``1 / frame_s`` Hz, no preprocessing. Before
+    anything is written, the features of every held-out frame are checked equal to the
+    detector's own (``DavisOnset.frames`` on the events). Slip class ``"1"`` (score
+    > 0); debounce from the options (default 2).
     """
-    import dataclasses
-
-    from slipkit.export.deploy_davis import deploy_area_rule
+    from slipkit.errors import SlipkitError
+    from slipkit.export.deploy import Deployment
+    from slipkit.export.deploy_davis import DAVIS_REPLAY_BYTES, _davis_held_out
 
     det = run.model
-    dep = deploy_area_rule(
-        task,
-        run,
-        dataset,
-        options,
-        DavisOnsetAreaRule(
-            min_pos_px=int(det.min_pos_px), neg_ratio=float(det.neg_ratio)
-        ).fit(),
-    )
-    notes = [n for n in dep.notes if not n.startswith("decision:")]
-    notes.append(
-        f"decision: slip when positive area >= {det.min_pos_px} px and negative area "
-        f"<= {det.neg_ratio:g} x positive (one-sided loss of contact; the graph)"
-    )
-    return dataclasses.replace(
-        dep, notes=notes, debounce_k=int(options.get("debounce_k") or 2)
+    scores = DavisOnsetScores(detector=det).fit()
+    frame_s, h, w = float(det.frame_s), int(det.height_px), int(det.width_px)
+
+    def check(trial: Any, ev: NDArray[np.float64], frames: NDArray[Any]) -> None:
+        cols = ["pos_area_px", "neg_area_px", "curl"]
+        want = det.frames(ev)[cols].to_numpy(np.float64)
+        got = scores.features(frames)
+        bad = np.flatnonzero(~np.isclose(want, got, rtol=1e-12, atol=1e-9).all(axis=1))
+        if len(bad) or len(want) != len(got):
+            k = int(bad[0]) if len(bad) else min(len(want), len(got))
+            raise SlipkitError(
+                f"trial {trial.trial_id}, frame {k}: the event frame's features differ "
+                f"from DavisOnset.frames ({len(bad)} of {len(frames)} frames); no "
+                "bundle written"
+            )
+
+    trials = _davis_held_out(task, run, dataset, frame_s, h, w, check)
+    channels = [
+        f"{p}_{r}_{c}" for p in ("pos", "neg") for r in range(h) for c in range(w)
+    ]
+    return Deployment(
+        frame={
+            "streams": [task.stream],
+            "channels": channels,
+            "shape": [2, h, w],
+            "window": 1,
+            "hop": 1,
+            "rate_hz": 1.0 / frame_s,
+        },
+        preprocessing=[],
+        export_options={},
+        positive="1",
+        debounce_k=int(options.get("debounce_k") or 2),
+        trials=trials,
+        model=scores,
+        max_replay_frames=max(1, DAVIS_REPLAY_BYTES // (8 * 2 * h * w)),
+        notes=[
+            f"event frames of {frame_s * 1e3:g} ms ({task.stream!r}): counts per pixel, "
+            f"positive then negative, {h} x {w} px",
+            f"the graph keeps fired pixels with >= {det.min_neighbours} fired "
+            "8-neighbours (Conv), sums their areas and the positive pixels' covariance",
+            f"decision: slip when positive area >= {det.min_pos_px} px, negative <= "
+            f"{det.neg_ratio:g} x positive and the positive pixels' curl < "
+            f"{det.max_curl:g} (a straight one-sided loss of contact)",
+        ],
     )
 
 
-__all__ = ["DavisOnsetAreaRule", "deploy_davis_onset", "export_davis_onset_rule"]
+__all__ = ["DavisOnsetScores", "deploy_davis_onset", "export_davis_onset"]
