@@ -150,8 +150,8 @@ class DavisOnset(DavisPolarity):
         frame_s: float = 0.005,
         width_px: int = 190,
         height_px: int = 180,
-        min_neighbours: int = 2,
-        min_pos_px: int = 6,
+        min_neighbours: int = 1,
+        min_pos_px: int = 3,
         neg_ratio: float = 0.25,
         max_curl: float = 5.0,
     ) -> None:
