@@ -122,7 +122,9 @@ def _deploy_davis(
     on one frame).
     """
     from slipkit.baselines.davis import DavisPolarity
+    from slipkit.baselines.davis_onset import DavisOnset
     from slipkit.export.davis import DavisAreaRule
+    from slipkit.export.davis_onset import deploy_davis_onset
     from slipkit.models.events import EventFrameClassifier
     from slipkit.train.tasks.davis import DavisRelease
 
@@ -130,12 +132,30 @@ def _deploy_davis(
     det = run.model
     if isinstance(det, EventFrameClassifier):  # the learned one: features in the graph
         return _deploy_davis_events(task, run, dataset, options)
+    if type(det) is DavisOnset:  # the same areas, the onset rule's graph
+        return deploy_davis_onset(task, run, dataset, options)
     if type(det) is not DavisPolarity:
         raise SlipkitError(
-            f"run {run.path}: only the DavisPolarity rule (its area filter is the "
-            f"runtime's davis_areas op) and the EventFrameClassifier deploy on DAVIS; "
-            f"the run's model is {type(det).__name__}"
+            f"run {run.path}: only the DavisPolarity and DavisOnset rules (their area "
+            f"filter is the runtime's davis_areas op) and the EventFrameClassifier "
+            f"deploy on DAVIS; the run's model is {type(det).__name__}"
         )
+    return deploy_area_rule(task, run, dataset, options, DavisAreaRule().fit())
+
+
+def deploy_area_rule(
+    task: Task,
+    run: Run,
+    dataset: Dataset,
+    options: Mapping[str, Any],
+    rule: Any,
+) -> Deployment:
+    """A rule on the filtered areas (``rule``: the graph's estimator on ``(pos, neg)``)
+    behind the ``davis_areas`` op, the op checked against the run's detector."""
+    from slipkit.train.tasks.davis import DavisRelease
+
+    assert isinstance(task, DavisRelease)
+    det = run.model
     frame_s, h, w = float(det.frame_s), int(det.height_px), int(det.width_px)
     step = {
         "op": "davis_areas",
@@ -178,7 +198,7 @@ def _deploy_davis(
         positive="1",
         debounce_k=int(options.get("debounce_k") or 1),
         trials=trials,
-        model=DavisAreaRule().fit(),
+        model=rule,
         max_replay_frames=max(1, DAVIS_REPLAY_BYTES // (8 * n_values)),
         notes=[
             f"event frames of {frame_s * 1e3:g} ms ({task.stream!r}): counts per pixel, "

@@ -162,7 +162,11 @@ FAMILIES: dict[str, Family] = {
             tasks=(_T + "davis:DavisRelease",),
             deploys=(_T + "davis:DavisRelease",),
             compares=(_T + "davis:DavisRelease",),
-            exporters=("slipkit.export.davis", "slipkit.export.events"),
+            exporters=(
+                "slipkit.export.davis",
+                "slipkit.export.davis_onset",
+                "slipkit.export.events",
+            ),
             scenes=("davis_release", "davis_release_hard"),
             comparisons=("davis",),
             scenario="davis",

@@ -1,0 +1,248 @@
+"""Exporter and deployment of the DAVIS onset rule (:mod:`slipkit.baselines.davis_onset`).
+
+The whole rule fits in one graph on the runtime's event frame (counts per pixel,
+``(batch, 2, H, W)``, positive then negative), no preprocessing op:
+
+1. ``fired = frame > 0``; the fired 8-neighbours per pixel as a ``Conv`` with a 3 x 3
+   kernel of ones and a zero centre (float32: exact small integers); kept pixels
+   ``fired & neighbours >= min_neighbours``;
+2. in float64: the kept areas per polarity (``ReduceSum``) and, from the kept positive
+   pixels' row and column sums (``MatMul`` with the pixel coordinates), their
+   covariance and its ``curl``;
+3. the score :func:`~slipkit.baselines.davis_onset.onset_score`: > 0 is slip.
+
+:class:`DavisOnsetScores` is the estimator side of the parity check (the detector's
+numpy features and score on runtime frames); the deployer checks those features equal
+the detector's own (``DavisOnset.frames`` on the events) on every held-out frame.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from onnx import helper
+from sklearn.base import BaseEstimator, ClassifierMixin
+from sklearn.utils.validation import check_is_fitted
+
+from slipkit.baselines.davis_onset import NEIGHBOURS, DavisOnset
+from slipkit.export._graph import DOUBLE, FLOAT, GraphBuilder
+from slipkit.export.registry import (
+    DEFAULT_OPSET,
+    ExportedGraph,
+    producers,
+    register_exporter,
+)
+
+INPUT = "event_frame"
+SCORE = "score"
+
+
+class DavisOnsetScores(ClassifierMixin, BaseEstimator):
+    """A :class:`DavisOnset` scoring runtime event frames ``(n, 2, H, W)``.
+
+    Parameters
+    ----------
+    detector : DavisOnset
+        Fitted.
+    """
+
+    def __init__(self, *, detector: DavisOnset) -> None:
+        self.detector = detector
+
+    def fit(
+        self, X: ArrayLike | None = None, y: ArrayLike | None = None
+    ) -> DavisOnsetScores:
+        """Check the detector is fitted (no data used)."""
+        del X, y
+        check_is_fitted(self.detector, "classes_")
+        self.classes_ = np.array([0, 1])
+        return self
+
+    def _frames(self, frames: ArrayLike) -> NDArray[np.float64]:
+        d = self.detector
+        return np.asarray(frames, dtype=np.float64).reshape(
+            -1, 2, int(d.height_px), int(d.width_px)
+        )
+
+    def features(self, frames: ArrayLike) -> NDArray[np.float64]:
+        """The detector's features of event frames."""
+        return self.detector.features(self._frames(frames))
+
+    def decision_function(self, frames: ArrayLike) -> NDArray[np.float64]:
+        """The onset score per frame: > 0 is slip."""
+        check_is_fitted(self, "classes_")
+        return self.detector.score(self.features(frames))
+
+    def predict(self, frames: ArrayLike) -> NDArray[np.int_]:
+        """1 (slip) where the score is > 0, else 0."""
+        return (self.decision_function(frames) > 0).astype(int)
+
+
+def export_davis_onset(
+    scores: DavisOnsetScores, *, opset: int = DEFAULT_OPSET
+) -> ExportedGraph:
+    """Export :class:`DavisOnsetScores` (module docstring).
+
+    Returns
+    -------
+    ExportedGraph
+        Input ``"event_frame"`` ``(batch, 2, H, W)`` float32 (counts per pixel), output
+        ``"score"`` ``(batch,)``: the onset score, > 0 is slip.
+    """
+    check_is_fitted(scores, "classes_")
+    d = scores.detector
+    h, w = int(d.height_px), int(d.width_px)
+    g = GraphBuilder("davis_onset_rule", opset)
+    fired = g.op("Cast", g.op("Greater", INPUT, g.const(0.0)), to=FLOAT)
+    flat = g.op("Reshape", fired, g.const([-1, 1, h, w], np.int64))
+    count = g.op(
+        "Conv", flat, g.const(NEIGHBOURS[None, None]), pads=[1, 1, 1, 1], stem="nb"
+    )
+    enough = g.op(
+        "Cast", g.op("Greater", count, g.const(d.min_neighbours - 0.5)), to=FLOAT
+    )
+    keep32 = g.op(
+        "Reshape", g.op("Mul", flat, enough), g.const([-1, 2, h, w], np.int64)
+    )
+    keep = g.op("Cast", keep32, to=DOUBLE, stem="keep")
+    areas = g.op("ReduceSum", keep, g.const([2, 3], np.int64), keepdims=0)  # (b, 2)
+
+    def col(i: int) -> str:
+        return g.op("Slice", areas, *(g.const([v], np.int64) for v in (i, i + 1, 1)))
+
+    pos_area, neg_area = col(0), col(1)  # (b, 1)
+    pos = g.op(
+        "Squeeze",
+        g.op("Slice", keep, *(g.const([v], np.int64) for v in (0, 1, 1))),
+        g.const([1], np.int64),
+    )  # (b, H, W)
+    x = np.arange(w, dtype=np.float64)[:, None]
+    y = np.arange(h, dtype=np.float64)[:, None]
+    rows = g.op("ReduceSum", pos, g.const([2], np.int64), keepdims=0)  # (b, H)
+    cols = g.op("ReduceSum", pos, g.const([1], np.int64), keepdims=0)  # (b, W)
+    n = g.op("Max", pos_area, g.const([1.0], np.float64))
+
+    def mean(a: str, v: NDArray[np.float64]) -> str:
+        return g.op("Div", g.op("MatMul", a, g.const(v, np.float64)), n)
+
+    mx, my = mean(cols, x), mean(rows, y)
+    vx = g.op("Sub", mean(cols, x * x), g.op("Mul", mx, mx))
+    vy = g.op("Sub", mean(rows, y * y), g.op("Mul", my, my))
+    px = g.op(
+        "Squeeze", g.op("MatMul", pos, g.const(x, np.float64)), g.const([2], np.int64)
+    )
+    cxy = g.op("Sub", mean(px, y), g.op("Mul", mx, my))
+    det_c = g.op("Sub", g.op("Mul", vx, vy), g.op("Mul", cxy, cxy))
+    root = g.op("Sqrt", g.op("Max", det_c, g.const([0.0], np.float64)))
+    curl = g.op("Div", g.op("Mul", root, g.const([12.0], np.float64)), n, stem="curl")
+    half = g.const([0.5], np.float64)
+    t1 = g.op("Add", pos_area, g.const([0.5 - float(d.min_pos_px)], np.float64))
+    t2 = g.op(
+        "Add",
+        g.op(
+            "Sub",
+            g.op("Mul", pos_area, g.const([float(d.neg_ratio)], np.float64)),
+            neg_area,
+        ),
+        half,
+    )
+    t3 = g.op("Sub", g.const([float(d.max_curl)], np.float64), curl)
+    out = g.op("Cast", g.op("Min", t1, t2, t3), to=FLOAT)
+    g.nodes.append(helper.make_node("Reshape", [out, g.const([-1], np.int64)], [SCORE]))
+    model = g.build(
+        [helper.make_tensor_value_info(INPUT, FLOAT, ["batch", 2, h, w])],
+        [helper.make_tensor_value_info(SCORE, FLOAT, ["batch"])],
+        doc=(
+            f"DAVIS onset rule: min(pos - {d.min_pos_px} + 0.5, {d.neg_ratio:g} pos - "
+            f"neg + 0.5, {d.max_curl:g} - curl) > 0 is slip"
+        ),
+    )
+    import sklearn
+
+    return ExportedGraph(
+        model=model,
+        input_name=INPUT,
+        input_shape=("batch", 2, h, w),
+        output_names=(SCORE,),
+        score_output=SCORE,
+        score_meaning="DavisOnsetScores.decision_function: > 0 is slip",
+        score_method="decision_function",
+        opset=g.opset,
+        classes=("0", "1"),
+        threshold=0.0,
+        input_meaning="one event frame, counts per pixel, positive then negative",
+        producers=producers(**{"scikit-learn": sklearn.__version__}),
+    )
+
+
+register_exporter(DavisOnsetScores, export_davis_onset)
+
+
+def deploy_davis_onset(
+    task: Any, run: Any, dataset: Any, options: Mapping[str, Any]
+) -> Any:
+    """A :class:`DavisOnset` run's deployment: event frames in, the whole rule in the graph.
+
+    Frame = one ``frame_s`` event frame as counts per pixel, ``(2, height_px,
+    width_px)``, window 1, hop 1, at ``1 / frame_s`` Hz, no preprocessing. Before
+    anything is written, the features of every held-out frame are checked equal to the
+    detector's own (``DavisOnset.frames`` on the events). Slip class ``"1"`` (score
+    > 0); debounce from the options (default 2).
+    """
+    from slipkit.errors import SlipkitError
+    from slipkit.export.deploy import Deployment
+    from slipkit.export.deploy_davis import DAVIS_REPLAY_BYTES, _davis_held_out
+
+    det = run.model
+    scores = DavisOnsetScores(detector=det).fit()
+    frame_s, h, w = float(det.frame_s), int(det.height_px), int(det.width_px)
+
+    def check(trial: Any, ev: NDArray[np.float64], frames: NDArray[Any]) -> None:
+        cols = ["pos_area_px", "neg_area_px", "curl"]
+        want = det.frames(ev)[cols].to_numpy(np.float64)
+        got = scores.features(frames)
+        bad = np.flatnonzero(~np.isclose(want, got, rtol=1e-12, atol=1e-9).all(axis=1))
+        if len(bad) or len(want) != len(got):
+            k = int(bad[0]) if len(bad) else min(len(want), len(got))
+            raise SlipkitError(
+                f"trial {trial.trial_id}, frame {k}: the event frame's features differ "
+                f"from DavisOnset.frames ({len(bad)} of {len(frames)} frames); no "
+                "bundle written"
+            )
+
+    trials = _davis_held_out(task, run, dataset, frame_s, h, w, check)
+    channels = [
+        f"{p}_{r}_{c}" for p in ("pos", "neg") for r in range(h) for c in range(w)
+    ]
+    return Deployment(
+        frame={
+            "streams": [task.stream],
+            "channels": channels,
+            "shape": [2, h, w],
+            "window": 1,
+            "hop": 1,
+            "rate_hz": 1.0 / frame_s,
+        },
+        preprocessing=[],
+        export_options={},
+        positive="1",
+        debounce_k=int(options.get("debounce_k") or 2),
+        trials=trials,
+        model=scores,
+        max_replay_frames=max(1, DAVIS_REPLAY_BYTES // (8 * 2 * h * w)),
+        notes=[
+            f"event frames of {frame_s * 1e3:g} ms ({task.stream!r}): counts per pixel, "
+            f"positive then negative, {h} x {w} px",
+            f"the graph keeps fired pixels with >= {det.min_neighbours} fired "
+            "8-neighbours (Conv), sums their areas and the positive pixels' covariance",
+            f"decision: slip when positive area >= {det.min_pos_px} px, negative <= "
+            f"{det.neg_ratio:g} x positive and the positive pixels' curl < "
+            f"{det.max_curl:g} (a straight one-sided loss of contact)",
+        ],
+    )
+
+
+__all__ = ["DavisOnsetScores", "deploy_davis_onset", "export_davis_onset"]
