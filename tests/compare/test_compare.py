@@ -145,16 +145,17 @@ def test_classification_comparison_writes_report(tmp_path: Path) -> None:
 
 
 def test_detector_comparison_exports_every_row(tmp_path: Path) -> None:
-    """A tiny DAVIS comparison: the polarity rules and the learned classifier all export."""
+    """A tiny DAVIS comparison: the polarity rules, the onset rule and the learned classifier
+    all export."""
     out = tmp_path / "davis"
     cfg = _compose(["comparison=davis", "comparison.dataset.n_trials=4", f"out={out}"])
     compare_main(cfg)
     df = pd.read_csv(out / "metrics.csv")
-    assert ["polarity_lines", "polarity_square", "event_logreg"] == df[
+    assert ["polarity_lines", "polarity_square", "onset", "event_logreg"] == df[
         "estimator"
     ].tolist()
-    assert ["analytic", "analytic", "learned"] == df["kind"].tolist()
-    assert [True, True, True] == (df["export"] == "ok").tolist()
+    assert ["analytic", "analytic", "analytic", "learned"] == df["kind"].tolist()
+    assert [True] * 4 == (df["export"] == "ok").tolist()
     assert True == bool(np.isfinite(df["f1"]).all())  # noqa: E712
     assert True == bool(np.isfinite(df["p99_us"]).all())  # noqa: E712
     assert (out / "delays.png").is_file()
