@@ -152,7 +152,7 @@ FAMILIES: dict[str, Family] = {
                 "slipkit.export.torsion",
             ),
             scenes=("sliptack_pull", "sliptack_pull_hard", "sliptack_drop"),
-            comparisons=("sliptack",),
+            comparisons=("sliptack", "sliptack_slip"),
             scenario="sliptack",
             docs=("simulation/sliptack.md", "baselines/sliptack.md"),
         ),
