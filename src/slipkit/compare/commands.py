@@ -49,6 +49,7 @@ from slipkit.compare.table import (
     verdict_limits,
 )
 from slipkit.errors import SlipkitError
+from slipkit.progress import quiet_progress
 from slipkit.train.runs import new_run_dir
 
 log = logging.getLogger("slipkit.compare")
@@ -216,6 +217,7 @@ def _run_one(
         timer.patch(get_class(str(node["_target_"]))),
         contextlib.redirect_stdout(buf),
         quiet_console(),
+        quiet_progress(),
     ):
         train_main(tcfg)
     task_s = time.perf_counter() - t0

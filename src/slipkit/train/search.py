@@ -20,7 +20,6 @@ search still reports a validation score for ``slipkit sweep`` to optimise.
 from __future__ import annotations
 
 import logging
-import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
@@ -29,6 +28,8 @@ import numpy as np
 from sklearn.base import clone
 from sklearn.metrics import get_scorer
 from sklearn.model_selection import GroupKFold, cross_val_score
+
+from slipkit.progress import progress_line
 
 log = logging.getLogger("slipkit.search")
 
@@ -44,7 +45,7 @@ def _progress(label: str, done: int, total: int, start: float, extra: str = "") 
         f"{label} {done}/{total} done, {elapsed:.0f} s elapsed, ETA {eta:.0f} s{extra}"
     )
     # stderr, not the log: slipkit's log goes to stdout and the run's train.log.
-    print(line, file=sys.stderr, flush=True)
+    progress_line(line)
 
 
 def _check_groups(groups: np.ndarray, cv: int, unit: str) -> None:

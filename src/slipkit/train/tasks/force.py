@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import inspect
 import logging
-import sys
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -31,6 +30,7 @@ from slipkit.data.dataset import Dataset
 from slipkit.data.splits import split_time_blocks
 from slipkit.errors import SlipkitError
 from slipkit.evaluate.metrics import regression_metrics
+from slipkit.progress import progress_line
 from slipkit.train.task import Task, TaskResult, analytic_estimators
 
 log = logging.getLogger("slipkit.force")
@@ -593,11 +593,9 @@ def _block_cv(
         mask[rows[b]] = True
         folds.append(float(score(pred, mask)))
         elapsed = time.perf_counter() - start
-        print(
+        progress_line(
             f"{label}: fold {i + 1}/{k} done, {elapsed:.0f} s elapsed, ETA "
-            f"{elapsed / (i + 1) * (k - i - 1):.0f} s",
-            file=sys.stderr,
-            flush=True,
+            f"{elapsed / (i + 1) * (k - i - 1):.0f} s"
         )
     return {
         "k": k,

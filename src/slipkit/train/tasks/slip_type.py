@@ -30,7 +30,6 @@ Each finished fold prints a progress line on stderr (step i of n, fold, elapsed,
 from __future__ import annotations
 
 import logging
-import sys
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -57,6 +56,7 @@ from slipkit.features.windows import (
     sliding_windows,
 )
 from slipkit.models.selection import fit_with_groups
+from slipkit.progress import progress_line
 from slipkit.train.task import Task, TaskResult, analytic_estimators
 from slipkit.train.tasks.slip_type_plots import _pct, _plot_time, _width_outputs
 
@@ -579,11 +579,9 @@ class WindowClassification(Task):
         elapsed = time.perf_counter() - t0
         eta = elapsed / done * (total - done)
         step, steps = self._phase_counter
-        print(
+        progress_line(
             f"slipkit train: [{step}/{steps}] {phase}: fold {done}/{total} done, "
-            f"{elapsed:.0f} s elapsed, ETA {eta:.0f} s for this step",
-            file=sys.stderr,
-            flush=True,
+            f"{elapsed:.0f} s elapsed, ETA {eta:.0f} s for this step"
         )
         if done == total:
             self._phase_counter = (step + 1, steps)
