@@ -64,6 +64,10 @@ class Family:
 _T = "slipkit.train.tasks."
 _DETECT = _T + "detection:StreamDetection"
 _WINDOWS = _T + "slip_type:WindowClassification"
+_ST = "slipkit.families.sliptack."
+_SLIPTACK_EXPORTERS = tuple(
+    f"{_ST}export.{m}" for m in ("speed", "detector", "onset", "spectral", "torsion")
+)
 
 FAMILIES: dict[str, Family] = {
     f.name: f
@@ -133,24 +137,10 @@ FAMILIES: dict[str, Family] = {
         Family(
             name="sliptack",
             sensor="sliptack",
-            tasks=(
-                _T + "sliptack:SlipTackSpeed",
-                _T + "sliptack:SlipTackAccel",
-                _DETECT,
-            ),
-            deploys=(_T + "sliptack:SlipTackSpeed", _DETECT),
-            compares=(
-                _T + "sliptack:SlipTackSpeed",
-                _T + "sliptack:SlipTackAccel",
-                _DETECT,
-            ),
-            exporters=(
-                "slipkit.export.sliptack",
-                "slipkit.export.sliptack_detector",
-                "slipkit.export.sliptack_onset",
-                "slipkit.export.spectral",
-                "slipkit.export.torsion",
-            ),
+            tasks=(_ST + "task:SlipTackSpeed", _ST + "task:SlipTackAccel", _DETECT),
+            deploys=(_ST + "task:SlipTackSpeed", _DETECT),
+            compares=(_ST + "task:SlipTackSpeed", _ST + "task:SlipTackAccel", _DETECT),
+            exporters=_SLIPTACK_EXPORTERS,
             scenes=("sliptack_pull", "sliptack_pull_hard", "sliptack_drop"),
             comparisons=("sliptack",),
             scenario="sliptack",
@@ -186,8 +176,24 @@ FAMILIES: dict[str, Family] = {
 
 #: modules of family folders (``slipkit/families/<name>/``) whose import registers their
 #: plug-ins, by kind; the stage that owns the kind imports them by name
+#: (:func:`load_plugins`) at its entry or at its first lookup:
+#:
+#: * ``exporters`` -- ``slipkit.export`` (exporters by estimator class);
+#: * ``deployers`` -- :func:`slipkit.export.deploy.deployer_for` (deployers by task class);
+#: * ``adapters`` -- :func:`slipkit.compare.adapters.adapt` (comparison adapters);
+#: * ``scenarios`` -- :func:`slipkit.closedloop.scenarios.get_scenario`;
+#: * ``effects`` -- ``slipkit.sim.effects`` (scene effects by name);
+#: * ``tasks`` -- :func:`slipkit.train.task.analytic_estimators` (the task modules register
+#:   the analytic estimators learned-model tasks refuse).
+#:
+#: Scenes, tasks and estimators are built from ``configs/`` by their ``_target_`` paths.
 PLUGIN_MODULES: dict[str, tuple[str, ...]] = {
-    "exporters": ("slipkit.families.gelsight.export",)
+    "exporters": ("slipkit.families.gelsight.export", *_SLIPTACK_EXPORTERS),
+    "deployers": (_ST + "deploy",),
+    "adapters": (_ST + "adapter",),
+    "scenarios": (_ST + "scenario",),
+    "effects": (_ST + "effects",),
+    "tasks": (_ST + "task",),
 }
 
 

@@ -1,19 +1,19 @@
 """Exporter of the learned SlipTack speed regressor: a window of nib samples in, speed out.
 
-:class:`~slipkit.models.spectral.SpectralSpeedRegressor` computes, every ``hop``
+:class:`~slipkit.families.sliptack.spectral.SpectralSpeedRegressor` computes, every ``hop``
 samples, features of the last ``W = window`` samples and maps them to a speed (mm/s)
 with a scikit-learn regressor. The graph holds all of it, on the window
 ``(batch, W, 1)`` float32 (oldest first), as the analytic speed graph
-(:mod:`slipkit.export.sliptack`) does:
+(:mod:`slipkit.families.sliptack.export.speed`) does:
 
 1. **f_d** - the internal analytic estimator's dominant frequency (``physics_``),
-   built by the analytic graph's own nodes (``slipkit.export.sliptack._frequency``:
+   built by the analytic graph's own nodes (``slipkit.families.sliptack.export.speed._frequency``:
    moving-average detrend, Hamming, two-stage DFT, eqs. 6-7); NaN (no peak) -> 0, as
    the batch features;
 2. **spectrum** - non-finite samples -> 0 (as the batch features), the least-squares
    line removed (``scipy.signal.detrend``'s ``linear``: two ``MatMul`` with the
    orthonormal basis of ``[1, t]``), Hamming, and the real DFT of length ``W`` with
-   the same factorised matrices (:func:`slipkit.export.sliptack.dft_matrices`);
+   the same factorised matrices (:func:`slipkit.families.sliptack.export.speed.dft_matrices`);
 3. **band powers** - one ``MatMul`` with the constant bin -> band membership, then
    ``log10(band / total + 1e-12)``;
 4. **peak frequencies** - strict local maxima of the power spectrum (interior bins,
@@ -57,7 +57,6 @@ from numpy.typing import ArrayLike, NDArray
 from onnx import compose, helper
 from sklearn.utils.validation import check_is_fitted
 
-from slipkit.baselines.sliptack import StickSlipSpeed
 from slipkit.export._graph import DOUBLE, FLOAT, GraphBuilder
 from slipkit.export.detectors import SCORE, WINDOW_INPUT, DetectorGraph
 from slipkit.export.registry import (
@@ -69,7 +68,8 @@ from slipkit.export.registry import (
     producers,
     register_exporter,
 )
-from slipkit.export.sliptack import (
+from slipkit.families.sliptack.export.detector import SpeedSlipDetector
+from slipkit.families.sliptack.export.speed import (
     _factor,
     _frequency,
     _peak_frequency,
@@ -77,8 +77,8 @@ from slipkit.export.sliptack import (
     _slice,
     dft_matrices,
 )
-from slipkit.export.sliptack_detector import SpeedSlipDetector
-from slipkit.models.spectral import SpectralSpeedRegressor
+from slipkit.families.sliptack.spectral import SpectralSpeedRegressor
+from slipkit.families.sliptack.speed import StickSlipSpeed
 
 FloatArray = NDArray[np.float64]
 _FEATURES = "spectral_features"
@@ -154,7 +154,7 @@ def twiddle_dft_matrices(
 ) -> tuple[FloatArray, FloatArray, FloatArray, int, int]:
     """Constants of a real DFT of length ``nfft`` in two GEMMs and one twiddle product.
 
-    Cooley-Tukey with ``nfft = N1 N2`` (:func:`slipkit.export.sliptack.dft_matrices`'s
+    Cooley-Tukey with ``nfft = N1 N2`` (:func:`slipkit.families.sliptack.export.speed.dft_matrices`'s
     factors) and the signal reshaped row-major to ``X[n1, n2] = x[N2 n1 + n2]``:
 
     1. ``A = F1 @ X``, ``F1`` of shape ``(2 N1, N1)`` with rows interleaved per
@@ -167,7 +167,7 @@ def twiddle_dft_matrices(
        Gs]``, ``M2 = [-Gs, Gc]`` the length-``N2`` DFT ``exp(-2 pi i n2 k2 / N2) = Gc +
        i Gs``: ``[Y_re, Y_im]`` of bin ``k1 + N1 k2``, ``k2 < K2``.
 
-    Against :func:`~slipkit.export.sliptack.dft_matrices` (a separate ``(2 N2, 2 K2)``
+    Against :func:`~slipkit.families.sliptack.export.speed.dft_matrices` (a separate ``(2 N2, 2 K2)``
     block per ``k1``, i.e. ``4 N1`` GEMMs of one row per window), step 3 is one GEMM of
     ``N1`` rows per window: the same products, far fewer calls.
 
@@ -519,7 +519,7 @@ def export_spectral_speed(
 class SpectralSlipDetector(SpeedSlipDetector):
     """Slip where the learned SlipTack speed reaches a threshold (mm/s).
 
-    :class:`~slipkit.export.sliptack_detector.SpeedSlipDetector` around a fitted
+    :class:`~slipkit.families.sliptack.export.detector.SpeedSlipDetector` around a fitted
     :class:`SpectralSpeedRegressor` (same rule: ``decision_function`` is the speed,
     ``-inf`` before the first window; slip where ``>= threshold``); its own class so
     that the exporter registry gives it the spectral graph.

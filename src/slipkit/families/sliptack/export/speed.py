@@ -1,6 +1,6 @@
 """Exporter of the SlipTack stick-slip speed estimator: a window of nib samples in, speed out.
 
-:class:`~slipkit.baselines.sliptack.StickSlipSpeed` is analytic and every step of it
+:class:`~slipkit.families.sliptack.speed.StickSlipSpeed` is analytic and every step of it
 has an ONNX form, so the graph holds the whole estimator (``docs/export.md``, *SlipTack
 speed*). It takes the last ``W = window`` nib samples, shape ``(batch, W, 1)`` float32,
 oldest first, and returns ``score`` ``(batch,)`` float32:
@@ -14,13 +14,13 @@ oldest first, and returns ``score`` ``(batch,)`` float32:
    two ``MatMul`` ops with constant cosine / sine matrices, the twiddles folded into the
    second, whose ``N1`` products each take one ``[A_re, A_im]`` row; 1000 = 25 x 40):
    0.13 M multiply-adds instead of the 1 M of one DFT matrix. (The two-GEMM twiddle form
-   of :mod:`slipkit.export.spectral` is ~3 us faster here but rounds the twiddled
+   of :mod:`slipkit.families.sliptack.export.spectral` is ~3 us faster here but rounds the twiddled
    values to float32 once more: speeds then differ from the batch by up to 1.5e-6
    relative, over the tests' 1e-6.)
    ONNX's ``DFT`` op is not used (onnxruntime 1.31 runs lengths that are not powers of
    two as an ``O(n^2)`` loop). The two products run in ``dft_dtype`` (float32 by
    default: MLAS's float32 kernels, ~14 us per call less than float64 in
-   ``python -m slipkit.export.sliptack``; the power spectrum is then good to ~1e-6
+   ``python -m slipkit.families.sliptack.export.parity``; the power spectrum is then good to ~1e-6
    relative, far below the gaps between the peaks the rule compares);
 3. **peaks** (eqs. 6-7): strict local maxima of the power spectrum below the largest
    ``f_max``, the ``min_peak_ratio`` rule (squared, on power) against the largest bin of
@@ -90,7 +90,7 @@ frequency is present". The wrapper is what ``slipkit export`` deploys
 ``hop`` / ``first_decision`` are ``W`` / the estimator's ``hop`` / ``W - 1``, the
 batch estimator's estimation instants).
 
-``python -m slipkit.export.sliptack`` prints parity and the time per call on simulated
+``python -m slipkit.families.sliptack.export.parity`` prints parity and the time per call on simulated
 ``sliptack_pull`` recordings.
 """
 
@@ -105,12 +105,6 @@ from numpy.typing import ArrayLike, NDArray
 from onnx import helper
 from sklearn.utils.validation import check_is_fitted
 
-from slipkit.baselines.sliptack import (
-    StickSlipSpeed,
-    f_max_values,
-    gate_first_bin,
-    harmonic_relation,
-)
 from slipkit.export._graph import DOUBLE, FLOAT, GraphBuilder
 from slipkit.export.detectors import (
     NO_SCORE,
@@ -123,6 +117,12 @@ from slipkit.export.registry import (
     ExportError,
     producers,
     register_exporter,
+)
+from slipkit.families.sliptack.speed import (
+    StickSlipSpeed,
+    f_max_values,
+    gate_first_bin,
+    harmonic_relation,
 )
 
 FloatArray = NDArray[np.float64]
@@ -317,7 +317,7 @@ def _dims(nfft: int) -> tuple[int, int]:
 def _frequency(g: GraphBuilder, x: str, est: StickSlipSpeed, dft_dtype: str) -> str:
     """Nodes computing ``f_d`` (Hz, float64, NaN when undefined) of the windows ``x`` (b, W).
 
-    (:mod:`slipkit.export.spectral`'s entry: the speed graph itself uses
+    (:mod:`slipkit.families.sliptack.export.spectral`'s entry: the speed graph itself uses
     :func:`_spectrum` and :func:`_peak_value` without the NaN.)
     """
     nfft = int(est.window) * int(est.pad_factor)
@@ -745,7 +745,7 @@ def export_stick_slip_speed(
         NaN; ``hop`` the estimator's, ``first_decision = window - 1``.
     """
     if not isinstance(estimator, StickSlipSpeed):
-        # e.g. the learned slipkit.models.spectral regressor: its graph is not eq. 3's
+        # e.g. the learned slipkit.families.sliptack.spectral regressor: its graph is not eq. 3's
         raise ExportError(
             f"no ONNX graph for a {type(estimator).__name__} speed estimator: only "
             "StickSlipSpeed (eq. 3 inverted) exports"
@@ -968,25 +968,3 @@ __all__ = [
     "sliding_spectrum_step",
     "speed_table",
 ]
-
-#: names that live in their own modules, still importable from here (saved run folders and
-#: configs name them by this module)
-_MOVED = {
-    "SpeedSlipDetector": "slipkit.export.sliptack_detector",
-    "export_speed_slip_detector": "slipkit.export.sliptack_detector",
-    "main": "slipkit.export.sliptack_parity",
-}
-
-
-def __getattr__(name: str) -> object:
-    if name in _MOVED:
-        import importlib
-
-        return getattr(importlib.import_module(_MOVED[name]), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-if __name__ == "__main__":
-    from slipkit.export.sliptack_parity import main as _main
-
-    _main()

@@ -1,6 +1,6 @@
 """SlipTack torsional slip: the RMS of the nib signal in the ~10 Hz band (a stream detector).
 
-Part of the SlipTack baselines (:mod:`slipkit.baselines.sliptack`, ``docs/baselines/sliptack.md``).
+Part of the SlipTack baselines (:mod:`slipkit.families.sliptack.speed`, ``docs/baselines/sliptack.md``).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from scipy.signal import butter, sosfilt, sosfilt_zi
 from sklearn.utils._param_validation import Interval
 
 from slipkit.baselines.base import DetectorStream, StreamDetector
-from slipkit.baselines.sliptack import FloatArray
+from slipkit.families.sliptack.speed import FloatArray
 
 
 # -- torsional slip: the ~10 Hz band ----------------------------------------------------------

@@ -1,5 +1,5 @@
 """The SlipTack slip decision as a speed threshold (mm/s) over the speed estimate, and its
-exporter: the speed graph of :mod:`slipkit.export.sliptack` with the threshold applied.
+exporter: the speed graph of :mod:`slipkit.families.sliptack.export.speed` with the threshold applied.
 """
 
 from __future__ import annotations
@@ -13,9 +13,6 @@ from sklearn.base import BaseEstimator, ClassifierMixin
 from sklearn.utils._param_validation import HasMethods, Interval
 from sklearn.utils.validation import check_is_fitted
 
-from slipkit.baselines.sliptack import (
-    StickSlipSpeed,
-)
 from slipkit.export.detectors import (
     DetectorGraph,
 )
@@ -23,7 +20,10 @@ from slipkit.export.registry import (
     DEFAULT_OPSET,
     register_exporter,
 )
-from slipkit.export.sliptack import FloatArray, export_stick_slip_speed
+from slipkit.families.sliptack.export.speed import FloatArray, export_stick_slip_speed
+from slipkit.families.sliptack.speed import (
+    StickSlipSpeed,
+)
 
 
 # -- the decision: a speed threshold --------------------------------------------------

@@ -5,7 +5,7 @@ cherry, basswood and acrylic pulled at 10-100 mm/s across the sensor);
 ``sliptack_drop`` its acceleration trials (Section IV-D, eq. 4: a 283 g object released
 from a parallel-jaw grip). The backbone holds the object's motion and the nib stream at
 zero; the nib's response is added by the effects ``stick_slip`` and ``gross_deflection``
-(:mod:`slipkit.sim.effects.sliptack`). See ``docs/simulation/sliptack.md``.
+(:mod:`slipkit.families.sliptack.effects`). See ``docs/simulation/sliptack.md``.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
 from slipkit.data.dataset import LabelSpec, StreamSpec
-from slipkit.physics.stick_slip import G_M_S2, ConstantSpeedMotion, FloatArray
+from slipkit.families.sliptack.physics import G_M_S2, ConstantSpeedMotion, FloatArray
 from slipkit.sim import params
 from slipkit.sim.core import SceneState, SimulationError, sample_times
 
@@ -142,7 +142,7 @@ class SlipTackPull:
         Object materials, one drawn per trial.
     friction : mapping
         Per material: ``mu_s``, ``mu_k`` and optional adhesion terms (see
-        :func:`slipkit.sim.effects.sliptack.stick_slip`).
+        :func:`slipkit.families.sliptack.effects.stick_slip`).
     """
 
     sensor = "sliptack"

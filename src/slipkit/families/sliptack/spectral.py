@@ -1,6 +1,6 @@
 """A learned SlipTack speed regressor on spectral features of the nib signal.
 
-The analytic estimator (:class:`slipkit.baselines.sliptack.StickSlipSpeed`) finds the
+The analytic estimator (:class:`slipkit.families.sliptack.speed.StickSlipSpeed`) finds the
 dominant stick-slip frequency of a window and inverts eq. 3 of the paper.
 :class:`SpectralSpeedRegressor` learns speed from the same window's spectrum instead:
 every ``hop`` samples, the last ``window`` samples (linearly detrended, Hamming) give a
@@ -17,12 +17,12 @@ seeded; or ``"ridge"`` on standardised features) maps them to the speed (mm/s). 
 prediction is held between hops (as the analytic estimator's) and NaN in a recording's
 first ``window - 1`` samples.
 
-The SlipTack speed task (:class:`~slipkit.train.tasks.sliptack.SlipTackSpeed`) also
+The SlipTack speed task (:class:`~slipkit.families.sliptack.task.SlipTackSpeed`) also
 reads the physics of its estimator for its diagnostics (the pull's ``f_d``, eq. 3's
 frequency at the true speed, the stick length): those come from the internal analytic
 estimator ``physics_`` fitted on the same trials (its ``mu_s`` / ``mu_k`` set by the
 task per material), so the task's frequency columns are the analytic ones and only the
-speed is learned. Exported by :mod:`slipkit.export.spectral` (the features as ONNX ops,
+speed is learned. Exported by :mod:`slipkit.families.sliptack.export.spectral` (the features as ONNX ops,
 the regressor through skl2onnx).
 """
 
@@ -46,8 +46,8 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
 from slipkit.baselines.base import segment_bounds
-from slipkit.baselines.sliptack import FixedNormalForceWarning, StickSlipSpeed
 from slipkit.errors import SlipkitError
+from slipkit.families.sliptack.speed import FixedNormalForceWarning, StickSlipSpeed
 
 FloatArray = NDArray[np.float64]
 

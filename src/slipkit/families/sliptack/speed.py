@@ -10,7 +10,7 @@ Follows the SlipTack paper (seed 000, ``docs/baselines/sliptack.md``):
   ``f_d`` the mean of ``f_i`` over ``f_max`` = 15, 16, ..., 40 Hz (26 values, eq. 7);
 * **speed** -- :func:`speed_from_frequency` inverts ``f = 1 / (tau_stick + tau_slip)``
   (eq. 3) in the ``exact`` form (the integrated oscillator's period,
-  :mod:`slipkit.physics.stick_slip`) or the paper's form (``tau_stick = mu_s Fn / (k_l
+  :mod:`slipkit.families.sliptack.physics`) or the paper's form (``tau_stick = mu_s Fn / (k_l
   v0)``, ``tau_slip = pi / w0``); the speed is undefined (NaN) at and above the
   saturation frequency; :class:`StickSlipSpeed` runs it over a sliding window;
 * **acceleration** -- :class:`DropAcceleration`: eq. 4 (``a = g - mu_k k_a (x - x0) /
@@ -48,7 +48,7 @@ from sklearn.utils.validation import check_is_fitted, validate_data
 
 from slipkit.baselines.base import segment_bounds
 from slipkit.errors import SlipkitError, SlipkitWarning
-from slipkit.physics.stick_slip import (
+from slipkit.families.sliptack.physics import (
     natural_frequency,
     saturation_frequency,
     slip_half_amplitude,
@@ -297,7 +297,7 @@ def speed_from_frequency(
     (``d = (mu_s - mu_k) Fn / k_l``, the integrated oscillator's period);
     ``form="paper"`` inverts ``1 / f = mu_s Fn / (k_l v0) + pi / w0``. The period falls
     monotonically with ``v0`` towards ``tau_slip`` at infinite speed, so the inverse is
-    unique below the saturation frequency (:func:`~slipkit.physics.stick_slip.
+    unique below the saturation frequency (:func:`~slipkit.families.sliptack.physics.
     saturation_frequency`: ``w0 / (2 pi)`` exact, ``w0 / pi`` paper) and undefined at or
     above it. Returns NaN there, and for ``f <= 0`` or non-finite ``f``; close below
     saturation the speed grows without bound (``v0 ~ w0 d / (1.5 (w0 / f - 2 pi))^(1/3)``
@@ -796,20 +796,3 @@ __all__ = [
     "parabolic_offset",
     "speed_from_frequency",
 ]
-
-
-#: classes that live in their own modules, still importable from here (saved run folders
-#: and configs name them by this module)
-_MOVED = {
-    "AccelerationStream": "slipkit.baselines.sliptack_accel",
-    "DropAcceleration": "slipkit.baselines.sliptack_accel",
-    "TorsionalSlipDetector": "slipkit.baselines.sliptack_torsion",
-}
-
-
-def __getattr__(name: str) -> object:
-    if name in _MOVED:
-        import importlib
-
-        return getattr(importlib.import_module(_MOVED[name]), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

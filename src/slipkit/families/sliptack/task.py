@@ -23,14 +23,16 @@ import numpy as np
 import pandas as pd
 from sklearn.base import clone
 
-from slipkit.baselines.sliptack import StickSlipSpeed as _StickSlipSpeed
-from slipkit.baselines.sliptack_accel import DropAcceleration as _DropAcceleration
 from slipkit.data.dataset import Dataset, Trial
 from slipkit.data.splits import TrialSplit, split_by_trial
 from slipkit.errors import SlipkitError
-from slipkit.models.spectral import SpectralSpeedRegressor as _SpectralSpeedRegressor
+from slipkit.families.sliptack.accel import DropAcceleration as _DropAcceleration
+from slipkit.families.sliptack.spectral import (
+    SpectralSpeedRegressor as _SpectralSpeedRegressor,
+)
+from slipkit.families.sliptack.speed import StickSlipSpeed as _StickSlipSpeed
 from slipkit.train.search import trial_cv
-from slipkit.train.task import Task, TaskResult
+from slipkit.train.task import Task, TaskResult, register_analytic_estimator
 
 log = logging.getLogger("slipkit.sliptack")
 #: any material the training side did not hold
@@ -392,7 +394,7 @@ class SlipTackAccel(Task):
     Parameters
     ----------
     features : list of str
-        Features of :class:`~slipkit.baselines.sliptack_accel.DropAcceleration` to compare
+        Features of :class:`~slipkit.families.sliptack.accel.DropAcceleration` to compare
         (each a clone of the configured estimator with ``feature`` set).
     test_size : float
         Fraction of trials held out.
@@ -595,5 +597,9 @@ def _accel_summary(metrics: Mapping[str, Any]) -> list[str]:
     )
     return lines
 
+
+# learned-model tasks refuse the SlipTack estimators (they read the nib stream in these tasks)
+register_analytic_estimator(_StickSlipSpeed)
+register_analytic_estimator(_DropAcceleration)
 
 __all__: Sequence[str] = ["SlipTackAccel", "SlipTackSpeed"]

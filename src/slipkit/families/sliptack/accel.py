@@ -1,6 +1,6 @@
 """SlipTack acceleration from the nib deflection (eqs. 4 and 5): the batch estimator and its stream.
 
-Part of the SlipTack baselines (:mod:`slipkit.baselines.sliptack`, ``docs/baselines/sliptack.md``).
+Part of the SlipTack baselines (:mod:`slipkit.families.sliptack.speed`, ``docs/baselines/sliptack.md``).
 """
 
 from __future__ import annotations
@@ -19,12 +19,12 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from slipkit.baselines.base import segment_bounds
-from slipkit.baselines.sliptack import (
+from slipkit.errors import TrainingDataError
+from slipkit.families.sliptack.speed import (
     FixedNormalForceWarning,
     FloatArray,
     StickSlipSpeed,
 )
-from slipkit.errors import TrainingDataError
 
 
 # -- acceleration: eqs. 4 and 5 -----------------------------------------------------------
