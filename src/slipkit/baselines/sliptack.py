@@ -1,0 +1,5 @@
+"""Import path kept for saved run folders; the family lives in slipkit.families.sliptack."""
+
+from slipkit.families.sliptack.accel import DropAcceleration  # noqa: F401
+from slipkit.families.sliptack.speed import StickSlipSpeed  # noqa: F401
+from slipkit.families.sliptack.torsion import TorsionalSlipDetector  # noqa: F401
