@@ -10,8 +10,9 @@ scene and scenario resolves, each config and doc page exists.
 
 The records hold strings only, resolved on demand (:func:`resolve`), so this module imports
 nothing of the stages and any stage may read it. A family packaged as one folder lives in
-``slipkit/families/<name>/``; :data:`PLUGIN_MODULES` names the modules of such folders that
-register plug-ins when imported (``slipkit.export`` imports the exporters listed there).
+``slipkit/families/<name>/`` (``gelsight``, ``sliptack``); :data:`PLUGIN_MODULES` names the
+modules of such folders that register plug-ins when imported, by kind, and the stage owning a
+kind imports them by name (:func:`load_plugins`), never statically.
 """
 
 from __future__ import annotations
