@@ -29,8 +29,8 @@ from hydra.core.global_hydra import GlobalHydra  # noqa: E402
 from hydra.utils import instantiate  # noqa: E402
 
 from slipkit import config_dir  # noqa: E402
-from slipkit.baselines.sliptack_torsion import TorsionalSlipDetector  # noqa: E402
 from slipkit.data import Dataset  # noqa: E402
+from slipkit.families.sliptack.torsion import TorsionalSlipDetector  # noqa: E402
 from slipkit.sim.commands import build_scene  # noqa: E402
 
 

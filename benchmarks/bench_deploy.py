@@ -528,7 +528,7 @@ def main() -> None:
         m = bundle.manifest
         model = read_run(run_dir).model
         if isinstance(model, dict):  # SlipTack: per-material speed estimators
-            from slipkit.export.sliptack_detector import SpeedSlipDetector
+            from slipkit.families.sliptack.export.detector import SpeedSlipDetector
 
             model = SpeedSlipDetector(speed=model["*"], threshold=0.0).fit()
         svm = name.startswith("tactip_svm")

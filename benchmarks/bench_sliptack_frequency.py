@@ -29,8 +29,8 @@ from hydra.core.global_hydra import GlobalHydra
 from omegaconf import OmegaConf
 
 from slipkit import config_dir
-from slipkit.baselines.sliptack import FixedNormalForceWarning, StickSlipSpeed
 from slipkit.data import Dataset
+from slipkit.families.sliptack.speed import FixedNormalForceWarning, StickSlipSpeed
 from slipkit.sim.commands import build_scene
 
 FRICTION = {"cherry": (0.62, 0.50), "basswood": (0.55, 0.45)}

@@ -54,8 +54,11 @@ from slipkit.export._graph import DOUBLE, FLOAT, GraphBuilder
 from slipkit.export.detectors import detector_windows
 from slipkit.export.parity import onnx_session
 from slipkit.export.registry import ExportedGraph
-from slipkit.export.sliptack import _frequency
-from slipkit.export.spectral import export_spectral_speed, graph_speeds
+from slipkit.families.sliptack.export.spectral import (
+    export_spectral_speed,
+    graph_speeds,
+)
+from slipkit.families.sliptack.export.speed import _frequency
 from slipkit.runtime.realtime import RealtimeOptions, apply_realtime, frozen_gc
 
 

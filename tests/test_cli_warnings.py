@@ -8,9 +8,9 @@ from typing import Any
 import pytest
 
 import slipkit.cli as cli
-from slipkit.baselines.sliptack import FixedNormalForceWarning
 from slipkit.data import save_dataset
 from slipkit.errors import SlipkitWarning
+from slipkit.families.sliptack.speed import FixedNormalForceWarning
 
 
 def _warn_thrice(cfg: Any) -> None:

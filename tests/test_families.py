@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from slipkit.families import FAMILIES, Family, resolve
+from slipkit.families import FAMILIES, PLUGIN_MODULES, Family, load_plugins, resolve
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -21,10 +21,14 @@ def test_tasks_have_the_adapters_and_deployers_the_record_claims(
     family: Family,
 ) -> None:
     """Each listed task resolves; each task it deploys has a deployer, each task it compares
-    an adapter (looked up as slipkit export and slipkit compare do)."""
+    an adapter (looked up as slipkit export and slipkit compare do, family folders'
+    plug-ins loaded first)."""
     from slipkit.compare.adapters import _ADAPTERS
     from slipkit.export.deploy import _DEPLOYERS
     from slipkit.train.task import Task
+
+    load_plugins("deployers")
+    load_plugins("adapters")
 
     classes = {ref: resolve(ref) for ref in family.tasks}
     assert all(issubclass(c, Task) for c in classes.values())
@@ -72,3 +76,29 @@ def test_every_comparison_and_scenario_belongs_to_a_family() -> None:
     comparisons = {p.stem for p in (ROOT / "configs/comparison").glob("*.yaml")}
     closedloop = {p.stem for p in (ROOT / "configs/closedloop").glob("*.yaml")}
     assert (set(), set()) == (comparisons - listed, closedloop - scenarios)
+
+
+def test_plugin_modules_are_family_folders_and_register_when_loaded() -> None:
+    """Every plug-in module lives in a family folder and loads; after loading, the stages'
+    lookups find the SlipTack family's parts (its deployer, adapters, scenario, effects,
+    analytic estimators)."""
+    import importlib
+
+    from slipkit.closedloop.scenarios import SCENARIOS, get_scenario
+    from slipkit.compare.adapters import _ADAPTERS
+    from slipkit.export.deploy import _DEPLOYERS
+    from slipkit.sim.core import EFFECTS
+    from slipkit.train.task import analytic_estimators
+
+    modules = [m for kind in PLUGIN_MODULES.values() for m in kind]
+    assert [] == [m for m in modules if not m.startswith("slipkit.families.")]
+    for module in modules:
+        importlib.import_module(module)
+    st = importlib.import_module("slipkit.families.sliptack.task")
+    speed = importlib.import_module("slipkit.families.sliptack.speed")
+    assert _DEPLOYERS.for_class(st.SlipTackSpeed) is not None
+    assert _ADAPTERS.for_class(st.SlipTackAccel) is not None
+    assert {"stick_slip", "gross_deflection", "nib_harmonics"} <= set(EFFECTS)
+    assert "sliptack" in SCENARIOS
+    assert get_scenario("sliptack") is not None
+    assert speed.StickSlipSpeed in analytic_estimators()

@@ -25,12 +25,12 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from slipkit.baselines.fsr import FSRTouchSlip, PolarityWarning
-from slipkit.baselines.sliptack import (
+from slipkit.errors import SlipkitError
+from slipkit.families.sliptack.speed import (
     FixedNormalForceWarning,
     StickSlipSpeed,
     parabolic_offset,
 )
-from slipkit.errors import SlipkitError
 
 RATE = 2000.0  # Hz
 

@@ -9,7 +9,7 @@ import pytest
 from tests.runtime.test_prepare import _detector, _manifest, _stream
 
 from slipkit.compare.costs import time_bundle
-from slipkit.export.sliptack_detector import export_speed_slip_detector
+from slipkit.families.sliptack.export.detector import export_speed_slip_detector
 from slipkit.runtime import ReplaySource, StreamLoop, load_bundle, write_bundle
 from slipkit.runtime.budget import block_p99
 

@@ -11,7 +11,7 @@ def test_logistic_onset_detectors_are_learned_and_rules_analytic() -> None:
     kinds = [
         _kind({"_target_": "slipkit.baselines.fsr_onset.FSROnsetLogistic"}, True),
         _kind(
-            {"_target_": "slipkit.baselines.sliptack_onset.SlipTackOnsetLogistic"}, True
+            {"_target_": "slipkit.families.sliptack.onset.SlipTackOnsetLogistic"}, True
         ),
         _kind({"_target_": "slipkit.baselines.fsr_onset.FSROnset"}, True),
         _kind({"_target_": "slipkit.models.svm.TacTipSVM"}, False),

@@ -17,7 +17,6 @@ from scipy.signal import butter, sosfilt, sosfilt_zi
 from slipkit import config_dir
 from slipkit.baselines.biotac import ForceDerivative, PressureVibration
 from slipkit.baselines.fsr import FSRTouchSlip
-from slipkit.baselines.sliptack_torsion import TorsionalSlipDetector
 from slipkit.data import Dataset
 from slipkit.export import ExportError, exporter_for
 from slipkit.export.detectors import (
@@ -28,13 +27,14 @@ from slipkit.export.detectors import (
     export_force_derivative,
     export_fsr_touch_slip,
     export_pressure_vibration,
-    export_torsional_slip,
     graph_scores,
     pressure_baseline,
     steady_state_fir,
 )
 from slipkit.export.parity import onnx_session
 from slipkit.export.registry import IR_VERSION
+from slipkit.families.sliptack.export.torsion import export_torsional_slip
+from slipkit.families.sliptack.torsion import TorsionalSlipDetector
 from slipkit.sim.commands import build_scene
 
 Arr = np.ndarray

@@ -11,13 +11,13 @@ import pytest
 from tests.runtime.helpers import linear_graph, manifest
 
 from slipkit.baselines.fsr import FSRTouchSlip
-from slipkit.baselines.sliptack import StickSlipSpeed
 from slipkit.export import check_parity, export
 from slipkit.export import force as _force  # noqa: F401  (registers the force exporters)
 from slipkit.export.detectors import export_fsr_touch_slip
 from slipkit.export.parity import onnx_session
-from slipkit.export.sliptack import export_stick_slip_speed
 from slipkit.export.torch import find_torch_parts, fold_standardisation
+from slipkit.families.sliptack.export.speed import export_stick_slip_speed
+from slipkit.families.sliptack.speed import StickSlipSpeed
 from slipkit.models.force import (
     ForceMLP,
     LocalLinearRegressor,

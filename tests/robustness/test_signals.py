@@ -15,10 +15,14 @@ from hypothesis.extra.numpy import arrays
 from slipkit.baselines.biotac import ForceDerivative, PressureVibration
 from slipkit.baselines.davis import DavisPolarity
 from slipkit.baselines.fsr import FSRTouchSlip
-from slipkit.baselines.sliptack import PAPER_F_MAX, StickSlipSpeed, dominant_frequency
-from slipkit.baselines.sliptack_accel import DropAcceleration
-from slipkit.baselines.sliptack_torsion import TorsionalSlipDetector
 from slipkit.errors import SlipkitError
+from slipkit.families.sliptack.accel import DropAcceleration
+from slipkit.families.sliptack.speed import (
+    PAPER_F_MAX,
+    StickSlipSpeed,
+    dominant_frequency,
+)
+from slipkit.families.sliptack.torsion import TorsionalSlipDetector
 
 RATE = 1000.0
 #: Relative round-off a flat signal may leave in a band-pass score (of |level|).

@@ -12,15 +12,15 @@ import pytest
 from numpy.typing import NDArray
 
 from slipkit._files import sha256_bytes
-from slipkit.baselines.sliptack import StickSlipSpeed
 from slipkit.export.detectors import NO_SCORE, check_detector_parity
 from slipkit.export.parity import onnx_session
 from slipkit.export.registry import ExportError
-from slipkit.export.sliptack import export_stick_slip_speed, graph_speeds
-from slipkit.export.sliptack_detector import (
+from slipkit.families.sliptack.export.detector import (
     SpeedSlipDetector,
     export_speed_slip_detector,
 )
+from slipkit.families.sliptack.export.speed import export_stick_slip_speed, graph_speeds
+from slipkit.families.sliptack.speed import StickSlipSpeed
 from slipkit.runtime import BundleError, StreamLoop, load_bundle, write_bundle
 from slipkit.runtime.bundle import PREPARE_FILE, Budget, sign_manifest
 from slipkit.runtime.cli import run

@@ -242,7 +242,7 @@ def test_fsr_hard_knocks_trip_a_threshold_fitted_on_the_base_scene() -> None:
 
 def second_harmonic_ratios(name: str, n_trials: int) -> np.ndarray:
     """|X(2 f)| / |X(f)| of each pull trial's steady nib signal (f: the model frequency)."""
-    from slipkit.physics.stick_slip import stick_slip_frequency
+    from slipkit.families.sliptack.physics import stick_slip_frequency
 
     scene = build(name)
     model = scene.model

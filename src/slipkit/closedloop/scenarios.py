@@ -11,8 +11,10 @@ decisions, and report the outcome).
 
 How a family registers
 ----------------------
-1. Write ``src/slipkit/closedloop/<family>.py`` with a class that satisfies
-   :class:`ClosedLoopScenario` and decorate it with ``@register_scenario("<family>")``::
+1. Write ``src/slipkit/families/<family>/scenario.py`` (listed in
+   ``slipkit.families.PLUGIN_MODULES["scenarios"]``) or ``src/slipkit/closedloop/<family>.py``
+   with a class that satisfies :class:`ClosedLoopScenario` and decorate it with
+   ``@register_scenario("<family>")``::
 
        from slipkit.closedloop.scenarios import register_scenario
 
@@ -30,8 +32,8 @@ How a family registers
    ``runs`` and ``detectors`` (see ``configs/closedloop/tactip.yaml``) and whatever the
    scenario's ``conditions`` reads.
 
-Nothing else: :func:`get_scenario` imports ``slipkit.closedloop.<family>`` on first use,
-which runs the decorator, so ``commands.py`` and ``run.py`` need no edit.
+Nothing else: :func:`get_scenario` imports the family folders' scenario modules, or
+``slipkit.closedloop.<family>``, on first use, which runs the decorator, so ``commands.py`` and ``run.py`` need no edit.
 
 Contract of ``run_trial``: draw everything from
 ``numpy.random.default_rng([seed, condition_index, trial])`` (so every detector meets the
@@ -48,6 +50,7 @@ import importlib
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, Protocol, TypeVar, runtime_checkable
 
+import slipkit.families as _families
 from slipkit._registry import Registry
 from slipkit.errors import SlipkitError
 
@@ -119,12 +122,16 @@ def register_scenario(name: str) -> Callable[[type[_T]], type[_T]]:
 
 
 def get_scenario(family: str) -> ClosedLoopScenario:
-    """A new scenario object for ``family`` (imports ``slipkit.closedloop.<family>`` first)."""
+    """A new scenario object for ``family`` (family folders' scenarios,
+    ``slipkit.families.PLUGIN_MODULES["scenarios"]``, or ``slipkit.closedloop.<family>``,
+    imported on first use)."""
     if not family.isidentifier():
         raise SlipkitError(
             f"closedloop.family={family!r}: expected a Python identifier (the module "
             "slipkit.closedloop.<family>)"
         )
+    if family not in SCENARIOS:
+        _families.load_plugins("scenarios")
     if family not in SCENARIOS:
         try:
             importlib.import_module(f"slipkit.closedloop.{family}")

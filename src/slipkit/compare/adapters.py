@@ -55,6 +55,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+import slipkit.families as _families
 from slipkit._registry import Registry
 from slipkit.data.dataset import Dataset
 from slipkit.errors import SlipkitError
@@ -160,7 +161,9 @@ def register_adapter(task_cls: type, fn: Adapter, *, overwrite: bool = False) ->
 
 
 def adapt(view: RunView) -> Evaluation:
-    """The unified evaluation of ``view`` by the adapter of its task's class."""
+    """The unified evaluation of ``view`` by the adapter of its task's class (family
+    folders' adapters, ``slipkit.families.PLUGIN_MODULES["adapters"]``, register first)."""
+    _families.load_plugins("adapters")
     fn = _ADAPTERS.for_class(type(view.task))
     if fn is not None:
         ev = fn(view)
@@ -590,52 +593,6 @@ def adapt_force(view: RunView) -> Evaluation:
     return Evaluation(row=row, split=m["split"])
 
 
-# -- SlipTack ------------------------------------------------------------------------------
-
-
-def adapt_sliptack_speed(view: RunView) -> Evaluation:
-    """SlipTack speed (mm/s) from the stick-slip frequency (:class:`SlipTackSpeed`)."""
-    m = view.metrics
-    overall = m["test"]["overall"]
-    row: dict[str, Any] = {
-        "rmse": _num(overall["rmse_mm_s"]),
-        "rmse_speed": _num(overall["rmse_mm_s"]),
-    }
-    model = view.model
-    if isinstance(model, Mapping):  # the speed task fits one estimator per material
-        model = next(iter(model.values()))
-    p = model.get_params()
-    window = int(p.get("window", 1))
-    rate = float(p.get("rate_hz", math.nan))
-    row.update(
-        window_frames=window, window_ms=window * 1000.0 / rate, decision_frames=window
-    )
-    return Evaluation(row=row, split=m["split"])
-
-
-def adapt_sliptack_accel(view: RunView) -> Evaluation:
-    """SlipTack drop acceleration (m/s^2) (:class:`SlipTackAccel`): the estimator's feature."""
-    m = view.metrics
-    p = view.model.get_params()
-    feature = str(p.get("feature", "deflection"))
-    test = m["test"][feature]
-    row: dict[str, Any] = {
-        "rmse": _num(test["rmse_m_s2"]),
-        "rmse_accel": _num(test["rmse_m_s2"]),
-    }
-    frames = (
-        int(p.get("smooth_frames", 1))
-        if feature == "deflection"
-        else int(p.get("slope_frames", 1))
-        + int((p.get("speed") or {}).get("window", 0))
-    )
-    rate = float(p.get("rate_hz", math.nan))
-    row.update(
-        window_frames=frames, window_ms=frames * 1000.0 / rate, decision_frames=frames
-    )
-    return Evaluation(row=row, split=m["split"])
-
-
 # -- DAVIS -----------------------------------------------------------------------------------
 
 
@@ -711,15 +668,12 @@ def _register_builtin() -> None:
     from slipkit.train.tasks.detection import StreamDetection
     from slipkit.train.tasks.force import ForceRegression
     from slipkit.train.tasks.slip_type import WindowClassification
-    from slipkit.train.tasks.sliptack import SlipTackAccel, SlipTackSpeed
     from slipkit.train.tasks.tactip import TacTipFrames
 
     register_adapter(TacTipFrames, adapt_tactip)
     register_adapter(WindowClassification, adapt_windows)
     register_adapter(StreamDetection, adapt_detection)
     register_adapter(ForceRegression, adapt_force)
-    register_adapter(SlipTackSpeed, adapt_sliptack_speed)
-    register_adapter(SlipTackAccel, adapt_sliptack_accel)
     register_adapter(DavisRelease, adapt_davis)
 
 

@@ -26,10 +26,6 @@ from slipkit.export import frame_gru as _frame_gru  # noqa: F401
 from slipkit.export import fsr_onset as _fsr_onset  # noqa: F401
 from slipkit.export import generic as _generic  # noqa: F401
 from slipkit.export import sklearn as _sklearn  # noqa: F401
-from slipkit.export import sliptack as _sliptack  # noqa: F401
-from slipkit.export import sliptack_detector as _sliptack_detector  # noqa: F401
-from slipkit.export import sliptack_onset as _sliptack_onset  # noqa: F401
-from slipkit.export import spectral as _spectral  # noqa: F401
 from slipkit.export import svm as _svm  # noqa: F401
 from slipkit.export import tactip_detector as _tactip_detector  # noqa: F401
 from slipkit.export import torch as _torch  # noqa: F401

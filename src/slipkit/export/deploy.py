@@ -90,6 +90,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+import slipkit.families as _families
 from slipkit._registry import Registry
 from slipkit.data.dataset import Dataset
 from slipkit.errors import SlipkitError
@@ -334,7 +335,11 @@ def register_deployer(cls: type, fn: Deployer, *, overwrite: bool = False) -> No
 
 
 def deployer_for(task: Task) -> Deployer:
-    """The deployer of ``task``'s class or its nearest registered base (SlipkitError if none)."""
+    """The deployer of ``task``'s class or its nearest registered base (SlipkitError if none).
+
+    Family folders' deployers (``slipkit.families.PLUGIN_MODULES["deployers"]``) register
+    on the first lookup."""
+    _families.load_plugins("deployers")
     found = _DEPLOYERS.for_class(type(task))
     if found is not None:
         return found
@@ -883,7 +888,6 @@ __all__ = [
     "trial_classes",
 ]
 
-# The SlipTack and DAVIS deployers live in their own modules; importing them registers
-# them (and keeps davis_event_frames importable from here).
-from slipkit.export import deploy_sliptack  # noqa: E402, F401  (registers its deployer)
+# The DAVIS deployer lives in its own module; importing it registers it (and keeps
+# davis_event_frames importable from here).
 from slipkit.export.deploy_davis import DAVIS_REPLAY_BYTES, davis_event_frames  # noqa: E402

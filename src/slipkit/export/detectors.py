@@ -2,7 +2,7 @@
 
 The code lives in one module per piece: :mod:`~slipkit.export.detector_graph` (the graph type
 and shared pieces), :mod:`~slipkit.export.fsr_touch_slip`, :mod:`~slipkit.export.biotac_detectors`,
-:mod:`~slipkit.export.torsion` and :mod:`~slipkit.export.detector_parity`; this module registers
+:mod:`~slipkit.export.detector_parity`; this module registers
 their exporters, re-exports their names and runs the parity benchmark
 (``python -m slipkit.export.detectors``).
 
@@ -39,8 +39,6 @@ return a float64 score: no cast nodes, no float32 rounding.
   MatMul over ``W = L + window - 1`` samples (:func:`steady_state_fir`), rectify,
   ``TopK`` for the ``n_exceed``-th largest of the last ``window`` outputs, over a
   **fixed baseline** (the detector's ``baseline`` option).
-* :class:`~slipkit.baselines.sliptack_torsion.TorsionalSlipDetector` -- the band-pass as in
-  the pressure graph, then the RMS of the last ``window`` outputs.
 
 Windowed IIR filters (:func:`steady_state_fir`): the graph filters its window with
 the state a constant input equal to the window's first sample would leave
@@ -84,7 +82,6 @@ from numpy.typing import NDArray
 from slipkit.baselines.base import StreamDetector
 from slipkit.baselines.biotac import ForceDerivative, PressureVibration
 from slipkit.baselines.fsr import FSRTouchSlip
-from slipkit.baselines.sliptack_torsion import TorsionalSlipDetector
 from slipkit.export.biotac_detectors import (  # noqa: F401
     _band_matrix,
     _reduce_min,
@@ -135,7 +132,6 @@ from slipkit.export.registry import (
     register_exporter,
     register_runtime_steps,
 )
-from slipkit.export.torsion import export_torsional_slip
 
 
 def _simulate(scene: str, n: int, seed: int) -> Any:
@@ -166,25 +162,14 @@ def _stack(
     return np.concatenate(xs), np.concatenate(ys), np.concatenate(segs)
 
 
-def _torsion(seed: int) -> tuple[NDArray[np.float64], NDArray[np.int_]]:
-    # the recipe of tests/export/test_detector_export.py: drift + noise, a 10 Hz burst
-    rng = np.random.default_rng(seed)
-    t = np.arange(4000) / 1000.0
-    x = 2.0 + 0.3 * t + rng.normal(0, 0.02, len(t))
-    on = (t >= 2.0) & (t < 3.0)
-    x[on] += 0.2 * np.sin(2 * np.pi * 10 * t[on])
-    return x[:, None], on.astype(int)
-
-
 def main() -> None:
     """Print parity and per-call time of every detector graph on simulated recordings.
 
     ``python -m slipkit.export.detectors``: thresholds fitted on 3 trials, parity
     (:func:`check_detector_parity`) on 3 other trials; time = median of 2000
-    batch-1 onnxruntime calls (one thread) on held-out windows.
+    batch-1 onnxruntime calls (one thread) on held-out windows (the SlipTack torsional
+    detector's row: ``python -m slipkit.families.sliptack.export.torsion``).
     """
-    import time
-
     rows: list[tuple[str, StreamDetector, DetectorGraph, Any, Any]] = []
     for input_ in ("voltage", "force"):
         X, y, seg = _stack(
@@ -243,18 +228,24 @@ def main() -> None:
     for thr in (2.0, None):
         det = PressureVibration(baseline=base, threshold=thr).fit(X, y, segments=seg)
         rows.append(("PressureVibration", det, export_pressure_vibration(det), Xh, sh))
-    Xt, yt = _torsion(0)
-    det = TorsionalSlipDetector().fit(Xt, yt)
-    rows.append(
-        ("TorsionalSlipDetector", det, export_torsional_slip(det), _torsion(1)[0], None)
-    )
-    tail = float(rows[-2][2].features["tail"])  # type: ignore[index]
+    tail = float(rows[-1][2].features["tail"])  # type: ignore[index]
     swing = max(float(np.ptp(Xh[sh == k])) for k in np.unique(sh))
     print(
         f"pressure baseline (median over the fit trials): {base:.3f} counts; filter tail "
         f"T(L) = {tail:.2e}, largest held-out swing {swing:.0f} counts -> score error "
         f"bound T(L) x swing / baseline = {tail * swing / base:.1e}"
     )
+    print_parity_rows(rows)
+
+
+def print_parity_rows(
+    rows: list[tuple[str, StreamDetector, DetectorGraph, Any, Any]],
+) -> None:
+    """Print parity and per-call time of ``(name, detector, graph, X held out, segments)``
+    rows: :func:`check_detector_parity`, then the median of 2000 batch-1 onnxruntime calls
+    on held-out windows."""
+    import time
+
     print(
         f"{'detector':26s} {'W':>4s} {'hop':>3s} {'threshold':>10s} {'calls':>6s} "
         f"{'agree %':>8s} {'flips':>5s} {'max|diff|':>9s} {'rel':>8s} {'eps':>8s} "
@@ -288,7 +279,6 @@ if __name__ != "__main__":
     register_exporter(FSRTouchSlip, export_fsr_touch_slip)
     register_exporter(ForceDerivative, export_force_derivative)
     register_exporter(PressureVibration, export_pressure_vibration)
-    register_exporter(TorsionalSlipDetector, export_torsional_slip)
     register_runtime_steps(FSRTouchSlip, fsr_runtime_steps)
     register_runtime_steps(PressureVibration, pressure_runtime_steps)
 
@@ -302,10 +292,10 @@ __all__ = [
     "export_force_derivative",
     "export_fsr_touch_slip",
     "export_pressure_vibration",
-    "export_torsional_slip",
     "fsr_press_sign_step",
     "graph_scores",
     "pressure_baseline",
+    "print_parity_rows",
     "steady_state_fir",
     "with_fixed_baseline",
 ]

@@ -10,8 +10,9 @@ scene and scenario resolves, each config and doc page exists.
 
 The records hold strings only, resolved on demand (:func:`resolve`), so this module imports
 nothing of the stages and any stage may read it. A family packaged as one folder lives in
-``slipkit/families/<name>/``; :data:`PLUGIN_MODULES` names the modules of such folders that
-register plug-ins when imported (``slipkit.export`` imports the exporters listed there).
+``slipkit/families/<name>/`` (``gelsight``, ``sliptack``); :data:`PLUGIN_MODULES` names the
+modules of such folders that register plug-ins when imported, by kind, and the stage owning a
+kind imports them by name (:func:`load_plugins`), never statically.
 """
 
 from __future__ import annotations
@@ -64,6 +65,10 @@ class Family:
 _T = "slipkit.train.tasks."
 _DETECT = _T + "detection:StreamDetection"
 _WINDOWS = _T + "slip_type:WindowClassification"
+_ST = "slipkit.families.sliptack."
+_SLIPTACK_EXPORTERS = tuple(
+    f"{_ST}export.{m}" for m in ("speed", "detector", "onset", "spectral", "torsion")
+)
 
 FAMILIES: dict[str, Family] = {
     f.name: f
@@ -133,24 +138,10 @@ FAMILIES: dict[str, Family] = {
         Family(
             name="sliptack",
             sensor="sliptack",
-            tasks=(
-                _T + "sliptack:SlipTackSpeed",
-                _T + "sliptack:SlipTackAccel",
-                _DETECT,
-            ),
-            deploys=(_T + "sliptack:SlipTackSpeed", _DETECT),
-            compares=(
-                _T + "sliptack:SlipTackSpeed",
-                _T + "sliptack:SlipTackAccel",
-                _DETECT,
-            ),
-            exporters=(
-                "slipkit.export.sliptack",
-                "slipkit.export.sliptack_detector",
-                "slipkit.export.sliptack_onset",
-                "slipkit.export.spectral",
-                "slipkit.export.torsion",
-            ),
+            tasks=(_ST + "task:SlipTackSpeed", _ST + "task:SlipTackAccel", _DETECT),
+            deploys=(_ST + "task:SlipTackSpeed", _DETECT),
+            compares=(_ST + "task:SlipTackSpeed", _ST + "task:SlipTackAccel", _DETECT),
+            exporters=_SLIPTACK_EXPORTERS,
             scenes=("sliptack_pull", "sliptack_pull_hard", "sliptack_drop"),
             comparisons=("sliptack", "sliptack_slip"),
             scenario="sliptack",
@@ -186,8 +177,24 @@ FAMILIES: dict[str, Family] = {
 
 #: modules of family folders (``slipkit/families/<name>/``) whose import registers their
 #: plug-ins, by kind; the stage that owns the kind imports them by name
+#: (:func:`load_plugins`) at its entry or at its first lookup:
+#:
+#: * ``exporters`` -- ``slipkit.export`` (exporters by estimator class);
+#: * ``deployers`` -- :func:`slipkit.export.deploy.deployer_for` (deployers by task class);
+#: * ``adapters`` -- :func:`slipkit.compare.adapters.adapt` (comparison adapters);
+#: * ``scenarios`` -- :func:`slipkit.closedloop.scenarios.get_scenario`;
+#: * ``effects`` -- ``slipkit.sim.effects`` (scene effects by name);
+#: * ``tasks`` -- :func:`slipkit.train.task.analytic_estimators` (the task modules register
+#:   the analytic estimators learned-model tasks refuse).
+#:
+#: Scenes, tasks and estimators are built from ``configs/`` by their ``_target_`` paths.
 PLUGIN_MODULES: dict[str, tuple[str, ...]] = {
-    "exporters": ("slipkit.families.gelsight.export",)
+    "exporters": ("slipkit.families.gelsight.export", *_SLIPTACK_EXPORTERS),
+    "deployers": (_ST + "deploy",),
+    "adapters": (_ST + "adapter",),
+    "scenarios": (_ST + "scenario",),
+    "effects": (_ST + "effects",),
+    "tasks": (_ST + "task",),
 }
 
 

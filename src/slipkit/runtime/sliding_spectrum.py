@@ -1,6 +1,6 @@
 """The SlipTack power spectrum updated per hop: a sliding DFT of the detrended, Hamming-weighted window.
 
-:func:`slipkit.baselines.sliptack.dominant_frequency` takes, per decision, the last
+:func:`slipkit.families.sliptack.speed.dominant_frequency` takes, per decision, the last
 ``W`` nib samples ``x[0..W-1]``, subtracts their centred ``s``-sample moving average
 (``scipy.ndimage.uniform_filter1d``, ``mode="nearest"``), multiplies by
 ``numpy.hamming(W)`` and takes the real DFT of length ``nfft``. All of it is linear

@@ -22,6 +22,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+import slipkit.families as _families
+from slipkit._registry import Registry
 from slipkit.data.dataset import Dataset
 from slipkit.errors import SlipkitError
 
@@ -135,12 +137,25 @@ def jsonable(value: Any) -> Any:
     return value
 
 
+#: analytic estimator classes family folders register (their tasks' modules, listed in
+#: ``slipkit.families.PLUGIN_MODULES["tasks"]``), by class
+_ANALYTIC: Registry[type, type] = Registry(
+    "analytic estimator", error=SlipkitError, key_type=type
+)
+
+
+def register_analytic_estimator(cls: type) -> type:
+    """Mark ``cls`` as an analytic estimator that learned-model tasks refuse (it reads a
+    stream inside its own task); returns ``cls``."""
+    return _ANALYTIC.register(cls, cls)
+
+
 def analytic_estimators() -> tuple[type, ...]:
     """The analytic estimators a learned-model task refuses (they read a stream inside
-    their own task): stream detectors, the DAVIS polarity rule, the SlipTack estimators."""
+    their own task): stream detectors, the DAVIS polarity rule and what family folders
+    register with :func:`register_analytic_estimator`."""
     from slipkit.baselines.base import StreamDetector
     from slipkit.baselines.davis import DavisPolarity
-    from slipkit.baselines.sliptack import StickSlipSpeed
-    from slipkit.baselines.sliptack_accel import DropAcceleration
 
-    return (StreamDetector, DavisPolarity, StickSlipSpeed, DropAcceleration)
+    _families.load_plugins("tasks")
+    return (StreamDetector, DavisPolarity, *_ANALYTIC)

@@ -10,5 +10,9 @@ from __future__ import annotations
 import importlib
 import pkgutil
 
+import slipkit.families as _families
+
 for _mod in pkgutil.iter_modules(__path__):
     importlib.import_module(f"{__name__}.{_mod.name}")
+# and family folders' effects (slipkit.families.PLUGIN_MODULES["effects"])
+_families.load_plugins("effects")

@@ -15,7 +15,9 @@ from omegaconf import OmegaConf
 from slipkit import config_dir
 from slipkit.closedloop.detectors import OracleDetector
 from slipkit.closedloop.plant import PlantState
-from slipkit.closedloop.sliptack import (
+from slipkit.errors import SlipkitError
+from slipkit.families.sliptack.physics import ConstantSpeedMotion, cycles_constant_speed
+from slipkit.families.sliptack.scenario import (
     NibOscillator,
     SlipTackPlant,
     SlipTackScenario,
@@ -23,8 +25,6 @@ from slipkit.closedloop.sliptack import (
     check_plant,
     run_sliptack_trial,
 )
-from slipkit.errors import SlipkitError
-from slipkit.physics.stick_slip import ConstantSpeedMotion, cycles_constant_speed
 from slipkit.sim.commands import build_scene
 from slipkit.sim.core import Scene
 

@@ -1,15 +1,15 @@
 """SlipTack effects: nib stick-slip oscillation and gross (axial) nib deflection.
 
 Both read the trial's object motion from ``state.truth["motion"]`` (set by the scene
-models in :mod:`slipkit.sim.scenes.sliptack`) and add to the nib signal in mm.
-Physics: :mod:`slipkit.physics.stick_slip`; documentation: ``docs/simulation/sliptack.md``.
+models in :mod:`slipkit.families.sliptack.scene`) and add to the nib signal in mm.
+Physics: :mod:`slipkit.families.sliptack.physics`; documentation: ``docs/simulation/sliptack.md``.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from slipkit.physics.stick_slip import (
+from slipkit.families.sliptack.physics import (
     ConstantSpeedMotion,
     cycle_bound,
     cycles_constant_speed,
@@ -38,8 +38,8 @@ def stick_slip(
     Stick while ``mu_s Fn + A_n >= k_l u`` (the nib moves with the object); slip with
     ``M u'' = mu_k Fn - k_l u`` (eq. 1, solution eq. 2) until ``u'`` equals the object
     speed again. Breakaway and re-stick times are computed cycle by cycle
-    (:func:`~slipkit.physics.stick_slip.cycles_constant_speed` for a constant pull,
-    :func:`~slipkit.physics.stick_slip.cycles_quasi_static` for an accelerating object)
+    (:func:`~slipkit.families.sliptack.physics.cycles_constant_speed` for a constant pull,
+    :func:`~slipkit.families.sliptack.physics.cycles_quasi_static` for an accelerating object)
     and ``u(t)`` is evaluated at the stream's own timestamps, so a slow stream aliases
     the oscillation. Adds ``1000 u`` (mm) to ``signals[target]``.
 

@@ -1,4 +1,4 @@
-"""The SlipTack speed graph (``slipkit.export.sliptack``): parity with the batch estimator, edge cases, bundle."""
+"""The SlipTack speed graph (``slipkit.families.sliptack.export.speed``): parity with the batch estimator, edge cases, bundle."""
 
 from __future__ import annotations
 
@@ -16,20 +16,20 @@ from numpy.typing import NDArray
 from omegaconf import DictConfig
 
 from slipkit import config_dir
-from slipkit.baselines.sliptack import StickSlipSpeed
 from slipkit.export.detectors import NO_SCORE, DetectorGraph, detector_windows
 from slipkit.export.parity import onnx_session
 from slipkit.export.registry import exporter_for
-from slipkit.export.sliptack import (
+from slipkit.families.sliptack.export.detector import (
+    SpeedSlipDetector,
+    export_speed_slip_detector,
+)
+from slipkit.families.sliptack.export.speed import (
     dft_matrices,
     export_stick_slip_speed,
     graph_speeds,
     peak_ranks,
 )
-from slipkit.export.sliptack_detector import (
-    SpeedSlipDetector,
-    export_speed_slip_detector,
-)
+from slipkit.families.sliptack.speed import StickSlipSpeed
 
 RATE = 1000.0
 W = 1000

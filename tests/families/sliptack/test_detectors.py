@@ -12,22 +12,22 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from slipkit import config_dir
-from slipkit.baselines.sliptack import (
-    StickSlipSpeed,
-    dominant_frequency,
-    f_max_values,
-    speed_from_frequency,
-)
-from slipkit.baselines.sliptack_accel import DropAcceleration
-from slipkit.baselines.sliptack_torsion import TorsionalSlipDetector
 from slipkit.data import Dataset
 from slipkit.errors import SlipkitError
-from slipkit.physics.stick_slip import (
+from slipkit.families.sliptack.accel import DropAcceleration
+from slipkit.families.sliptack.physics import (
     ConstantSpeedMotion,
     cycles_constant_speed,
     saturation_frequency,
     stick_slip_frequency,
 )
+from slipkit.families.sliptack.speed import (
+    StickSlipSpeed,
+    dominant_frequency,
+    f_max_values,
+    speed_from_frequency,
+)
+from slipkit.families.sliptack.torsion import TorsionalSlipDetector
 from slipkit.sim.commands import build_scene
 
 RATE = 1000.0

@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from slipkit.baselines.sliptack_onset import (
+from slipkit.errors import TrainingDataError
+from slipkit.families.sliptack.onset import (
     SlipTackOnset,
     SlipTackOnsetLogistic,
     slope_weights,
 )
-from slipkit.errors import TrainingDataError
 
 RATE = 1000.0
 SIGMA = 0.01  # mm, the simulated read-out noise

@@ -13,7 +13,8 @@ from scipy.integrate import solve_ivp
 from slipkit import config_dir
 from slipkit.cli import main as cli_main
 from slipkit.data import load_dataset
-from slipkit.physics.stick_slip import (
+from slipkit.families.sliptack.effects import stick_slip
+from slipkit.families.sliptack.physics import (
     ConstantSpeedMotion,
     cycles_constant_speed,
     cycles_quasi_static,
@@ -23,10 +24,9 @@ from slipkit.physics.stick_slip import (
     stick_slip_frequency,
     tau_slip_paper,
 )
+from slipkit.families.sliptack.scene import SlipTackDrop, SlipTackPull
 from slipkit.sim import Scene, SimulationError
 from slipkit.sim.commands import build_scene
-from slipkit.sim.effects.sliptack import stick_slip
-from slipkit.sim.scenes.sliptack import SlipTackDrop, SlipTackPull
 
 M, K_L = 1.4e-5, 9.45  # the paper's nib (kg, N/m)
 FN = 0.05  # per-nib normal load of the default configs (N)

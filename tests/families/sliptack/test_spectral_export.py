@@ -14,18 +14,18 @@ from numpy.typing import NDArray
 from omegaconf import DictConfig
 
 from slipkit import config_dir
-from slipkit.baselines.sliptack import FixedNormalForceWarning, StickSlipSpeed
 from slipkit.export import export
 from slipkit.export.detectors import check_detector_parity, detector_windows
 from slipkit.export.parity import onnx_session
 from slipkit.export.registry import ExportError
-from slipkit.export.spectral import (
+from slipkit.families.sliptack.export.spectral import (
     SpectralSlipDetector,
     _feature_graph,
     export_spectral_speed,
     graph_speeds,
 )
-from slipkit.models.spectral import SpectralSpeedRegressor
+from slipkit.families.sliptack.spectral import SpectralSpeedRegressor
+from slipkit.families.sliptack.speed import FixedNormalForceWarning, StickSlipSpeed
 
 RATE = 1000.0
 
@@ -145,7 +145,7 @@ def test_slip_detector_decides_as_the_batch_rule(data: Data) -> None:
 
 def test_twiddle_dft_is_numpys_rfft() -> None:
     """The two-GEMM twiddle DFT's power equals |numpy.fft.rfft|^2 at every bin (float64)."""
-    from slipkit.export.spectral import twiddle_dft_matrices
+    from slipkit.families.sliptack.export.spectral import twiddle_dft_matrices
 
     w = 1000
     x = np.random.default_rng(3).normal(0.0, 1.0, (2, w))
@@ -221,10 +221,10 @@ def test_train_export_replay_scores_as_the_regressor(
 ) -> None:
     """sliptack_speed run of spectral_gbr -> slipkit export -> slipkit-run: the batch speeds."""
     from slipkit.export.commands import export_main
+    from slipkit.families.sliptack.task import DEFAULT
     from slipkit.runtime.cli import main
     from slipkit.train.commands import train_main
     from slipkit.train.runs import read_run
-    from slipkit.train.tasks.sliptack import DEFAULT
 
     run = tmp_path / "run"
     train_main(

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from tests.baselines.test_sliptack_onset import pull, stack, training
+from tests.families.sliptack.test_onset import pull, stack, training
 
-from slipkit.baselines.sliptack_onset import SlipTackOnset, SlipTackOnsetLogistic
 from slipkit.export import export
 from slipkit.export.detectors import (
     NO_SCORE,
@@ -15,6 +14,7 @@ from slipkit.export.detectors import (
     graph_scores,
 )
 from slipkit.export.parity import onnx_session
+from slipkit.families.sliptack.onset import SlipTackOnset, SlipTackOnsetLogistic
 
 
 def _fitted(cls: type[SlipTackOnset]) -> SlipTackOnset:

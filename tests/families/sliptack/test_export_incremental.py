@@ -10,15 +10,15 @@ import pytest
 from numpy.typing import NDArray
 from scipy.ndimage import uniform_filter1d
 
-from slipkit.baselines.sliptack import StickSlipSpeed, dominant_frequency
 from slipkit.export.detectors import NO_SCORE, check_detector_parity
 from slipkit.export.parity import onnx_session
 from slipkit.export.registry import ExportError
-from slipkit.export.sliptack import export_stick_slip_speed, graph_speeds
-from slipkit.export.sliptack_detector import (
+from slipkit.families.sliptack.export.detector import (
     SpeedSlipDetector,
     export_speed_slip_detector,
 )
+from slipkit.families.sliptack.export.speed import export_stick_slip_speed, graph_speeds
+from slipkit.families.sliptack.speed import StickSlipSpeed, dominant_frequency
 from slipkit.runtime import BundleError
 from slipkit.runtime.preprocessing import Pipeline
 from slipkit.runtime.sliding_spectrum import SlidingSpectrum

@@ -1,8 +1,8 @@
-"""ONNX graphs of the SlipTack onset detectors (:mod:`slipkit.baselines.sliptack_onset`).
+"""ONNX graphs of the SlipTack onset detectors (:mod:`slipkit.families.sliptack.onset`).
 
 Both detectors' scores are one linear filter of the window plus a constant
-(:meth:`~slipkit.baselines.sliptack_onset.SlipTackOnset.weights`,
-:meth:`~slipkit.baselines.sliptack_onset.SlipTackOnset.bias`): the analytic one's the
+(:meth:`~slipkit.families.sliptack.onset.SlipTackOnset.weights`,
+:meth:`~slipkit.families.sliptack.onset.SlipTackOnset.bias`): the analytic one's the
 signed least-squares slope (mm/s), the learned one's the logit with its scaler and
 coefficients folded in. The graph reads the raw float32 window ``(batch, W, 1)``
 (oldest first), casts it to float64 (the batch detector's precision), and computes
@@ -16,7 +16,6 @@ from __future__ import annotations
 import numpy as np
 from sklearn.utils.validation import check_is_fitted
 
-from slipkit.baselines.sliptack_onset import SlipTackOnset, SlipTackOnsetLogistic
 from slipkit.export._graph import GraphBuilder
 from slipkit.export.detectors import (
     NO_SCORE,
@@ -27,6 +26,7 @@ from slipkit.export.detectors import (
     _prologue,
 )
 from slipkit.export.registry import DEFAULT_OPSET, register_exporter
+from slipkit.families.sliptack.onset import SlipTackOnset, SlipTackOnsetLogistic
 
 
 def export_sliptack_onset(

@@ -29,8 +29,8 @@ The sensor frame (:class:`SlipTackSensor`): the 1 kHz coupled-mode nib signal th
 ``sliptack_pull`` / ``sliptack_drop`` scenes make, built at every frame from the plant's
 current slip speed and grip by the scenes' own effect list: ``stick_slip``'s nib
 oscillator (eqs. 1-2) stepped exactly through time (:class:`NibOscillator`: the law of
-:func:`slipkit.physics.stick_slip.cycles_quasi_static`, one frame at a time, with the
-adhesion term of :func:`slipkit.sim.effects.sliptack.stick_slip`), and the memoryless
+:func:`slipkit.families.sliptack.physics.cycles_quasi_static`, one frame at a time, with the
+adhesion term of :func:`slipkit.families.sliptack.effects.stick_slip`), and the memoryless
 effects (``gross_deflection``, ``white_noise``) called as functions on a one-frame
 :class:`~slipkit.sim.core.SceneState`.
 """
@@ -60,9 +60,9 @@ from slipkit.closedloop.plant import (
 from slipkit.closedloop.run import Outcome, speed_grid
 from slipkit.closedloop.scenarios import plant_params, register_scenario
 from slipkit.errors import SlipkitError
-from slipkit.physics.stick_slip import G_M_S2, natural_frequency
+from slipkit.families.sliptack.physics import G_M_S2, natural_frequency
+from slipkit.families.sliptack.scene import SlipTackDrop, SlipTackPull
 from slipkit.sim.core import EFFECTS, Scene, SceneState, draw_effect_params, effect_name
-from slipkit.sim.scenes.sliptack import SlipTackDrop, SlipTackPull
 
 #: Effects called per frame as functions of the plant's state (no memory across frames).
 FRAME_EFFECTS = frozenset({"gross_deflection", "white_noise"})
@@ -82,7 +82,7 @@ class NibOscillator:
     speed ``v`` and the per-nib load ``F_n`` are held (a zero-order hold of the plant's
     state over a frame); events inside the interval are found exactly, so a 1 kHz frame
     does not quantise the 130.8 Hz nib's cycles. With constant ``v`` and ``F_n`` this is
-    :func:`slipkit.physics.stick_slip.cycles_constant_speed` (a test checks the period).
+    :func:`slipkit.families.sliptack.physics.cycles_constant_speed` (a test checks the period).
 
     Written by hand: the scene's effect integrates a whole trial's cycles from a known
     motion, and the closed loop only knows the motion up to the current frame.

@@ -7,9 +7,9 @@ The graph contract: :mod:`slipkit.export.detectors`.
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import NDArray
 from sklearn.utils.validation import check_is_fitted
 
-from slipkit.baselines.sliptack_torsion import TorsionalSlipDetector
 from slipkit.export._graph import GraphBuilder
 from slipkit.export.biotac_detectors import _band_matrix
 from slipkit.export.detector_graph import (
@@ -21,9 +21,8 @@ from slipkit.export.detector_graph import (
     _prologue,
     steady_state_fir,
 )
-from slipkit.export.registry import (
-    DEFAULT_OPSET,
-)
+from slipkit.export.registry import DEFAULT_OPSET, register_exporter
+from slipkit.families.sliptack.torsion import TorsionalSlipDetector
 
 
 # -- SlipTack torsional slip ---------------------------------------------------------------
@@ -106,3 +105,40 @@ def export_torsional_slip(
         },
         scipy=scipy.__version__,
     )
+
+
+def _torsion(seed: int) -> tuple[NDArray[np.float64], NDArray[np.int_]]:
+    # the recipe of tests/export/test_detector_export.py: drift + noise, a 10 Hz burst
+    rng = np.random.default_rng(seed)
+    t = np.arange(4000) / 1000.0
+    x = 2.0 + 0.3 * t + rng.normal(0, 0.02, len(t))
+    on = (t >= 2.0) & (t < 3.0)
+    x[on] += 0.2 * np.sin(2 * np.pi * 10 * t[on])
+    return x[:, None], on.astype(int)
+
+
+def main() -> None:
+    """Print the torsional graph's parity and per-call time as ``python -m
+    slipkit.export.detectors`` does (fit on one synthetic recording, parity on another)."""
+    from slipkit.export.detectors import print_parity_rows
+
+    Xt, yt = _torsion(0)
+    det = TorsionalSlipDetector().fit(Xt, yt)
+    print_parity_rows(
+        [
+            (
+                "TorsionalSlipDetector",
+                det,
+                export_torsional_slip(det),
+                _torsion(1)[0],
+                None,
+            )
+        ]
+    )
+
+
+# ``python -m`` runs a second copy of this module as __main__; only the imported one registers
+if __name__ == "__main__":
+    main()
+else:
+    register_exporter(TorsionalSlipDetector, export_torsional_slip)

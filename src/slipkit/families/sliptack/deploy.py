@@ -29,13 +29,16 @@ def _deploy_sliptack_speed(
     estimation instants). The run saves one estimator per training material plus
     ``"*"`` (all training trials, the configured friction); a gripper does not know
     the material, so ``"*"`` is deployed. A speed has no slip class: the decision is
-    :class:`slipkit.export.sliptack_detector.SpeedSlipDetector`'s ``speed >= threshold`` with
+    :class:`slipkit.families.sliptack.export.detector.SpeedSlipDetector`'s ``speed >= threshold`` with
     the threshold from the export config's ``regression.threshold`` (mm/s; 0: slip
     whenever a stick-slip frequency is found), class ``"1"``.
     """
-    from slipkit.export.sliptack import incremental_problem, sliding_spectrum_step
-    from slipkit.export.sliptack_detector import SpeedSlipDetector
-    from slipkit.train.tasks.sliptack import DEFAULT, SlipTackSpeed, _split
+    from slipkit.families.sliptack.export.detector import SpeedSlipDetector
+    from slipkit.families.sliptack.export.speed import (
+        incremental_problem,
+        sliding_spectrum_step,
+    )
+    from slipkit.families.sliptack.task import DEFAULT, SlipTackSpeed, _split
 
     assert isinstance(task, SlipTackSpeed)
     models = run.model
@@ -56,10 +59,10 @@ def _deploy_sliptack_speed(
     threshold = float(reg.get("threshold") or 0.0)
     steps: list[dict[str, Any]] = []
     export_options: dict[str, Any] = {}
-    from slipkit.models.spectral import SpectralSpeedRegressor
+    from slipkit.families.sliptack.spectral import SpectralSpeedRegressor
 
     if isinstance(est, SpectralSpeedRegressor):  # learned: export/spectral.py's graph
-        from slipkit.export.spectral import SpectralSlipDetector
+        from slipkit.families.sliptack.export.spectral import SpectralSlipDetector
 
         detector = SpectralSlipDetector(speed=est, threshold=threshold).fit()
         holds = f"SpectralSpeedRegressor ({est.model}, material '*')"
@@ -115,7 +118,7 @@ def _deploy_sliptack_speed(
 
 
 def _register_sliptack() -> None:
-    from slipkit.train.tasks.sliptack import SlipTackSpeed
+    from slipkit.families.sliptack.task import SlipTackSpeed
 
     register_deployer(SlipTackSpeed, _deploy_sliptack_speed)
 

@@ -1,22 +1,22 @@
 """Parity and per-call time of the SlipTack speed graph on simulated recordings:
-``python -m slipkit.export.sliptack`` (or ``python -m slipkit.export.sliptack_parity``) prints them.
+``python -m slipkit.families.sliptack.export.parity`` prints them.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from slipkit.export.sliptack import export_stick_slip_speed, graph_speeds
-from slipkit.export.sliptack_detector import (
+from slipkit.families.sliptack.export.detector import (
     SpeedSlipDetector,
     export_speed_slip_detector,
 )
+from slipkit.families.sliptack.export.speed import export_stick_slip_speed, graph_speeds
 
 
 def main() -> None:
     """Print parity and per-call time of the speed graph on simulated recordings.
 
-    ``python -m slipkit.export.sliptack [key=value ...]``: the ``sliptack_frequency``
+    ``python -m slipkit.families.sliptack.export.parity [key=value ...]``: the ``sliptack_frequency``
     detector config (each ``key=value`` overrides ``detector.key``)
     (physics stick length, friction 0.55 / 0.45), 12 ``sliptack_pull`` trials (seed 1);
     per ``dft_dtype``: speed parity at the runtime's call instants (relative |diff|
