@@ -1,6 +1,7 @@
 """Exported models side by side: the slipkit loop, the bare onnxruntime call, the native model, the floor.
 
-Trains one run per learned family (``slipkit.train.commands.train_main``), exports
+Trains one run per learned family and for the DAVIS onset rule (analytic, the whole
+rule in the graph) (``slipkit.train.commands.train_main``), exports
 each with ``slipkit export`` (``export_main``: parity checked, session options
 measured), then measures in one process, batch 1, one thread, rounds interleaved:
 
@@ -142,6 +143,13 @@ RUNS: dict[str, tuple[list[str], float | None, str]] = {
         ],
         None,
         "",
+    ),
+    # An analytic rule whose whole decision is the graph (event frames in, no
+    # preprocessing op): the onset rule's Conv and moments on 2 x 180 x 190 frames.
+    "davis_onset": (
+        ["experiment=davis_release", "detector=davis_onset", "dataset.n_trials=4"],
+        None,
+        "DAVIS onset rule (5 ms event frames, the whole rule in the graph)",
     ),
     # A step graph with a recurrent state (frame + h_in -> score + h_out): the bare
     # call binds the state too (_bound_state), native is the detector's own per-frame
@@ -531,6 +539,10 @@ def main() -> None:
             from slipkit.families.sliptack.export.detector import SpeedSlipDetector
 
             model = SpeedSlipDetector(speed=model["*"], threshold=0.0).fit()
+        if type(model).__name__ == "DavisOnset":  # the graph's estimator: event frames in
+            from slipkit.export.davis_onset import DavisOnsetScores
+
+            model = DavisOnsetScores(detector=model).fit()
         svm = name.startswith("tactip_svm")
         graph = export(
             model,

@@ -158,6 +158,11 @@ def test_detector_comparison_exports_every_row(tmp_path: Path) -> None:
     assert [True] * 4 == (df["export"] == "ok").tolist()
     assert True == bool(np.isfinite(df["f1"]).all())  # noqa: E712
     assert True == bool(np.isfinite(df["p99_us"]).all())  # noqa: E712
+    # each row's debounce chosen on its training trials from the task's candidates
+    assert set(df["debounce_k"]) <= {1, 2, 3}
+    assert True == bool(  # noqa: E712
+        df["operating_point_from"].str.contains("training trials").all()
+    )
     assert (out / "delays.png").is_file()
 
 

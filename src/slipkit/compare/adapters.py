@@ -628,7 +628,9 @@ def adapt_davis(view: RunView) -> Evaluation:
     if "operating_point" in m["test"]:  # trial events: each slip frame an alarm
         point = dict(m.get("operating_point") or {})
         row.update(event_row(m["test"]["operating_point"], str(point.get("from", ""))))
-    row.update(window_frames=1, window_ms=frame_s * 1000.0, decision_frames=1)
+    # a decision: the chosen debounce's consecutive frames
+    k = int((m.get("operating_point") or {}).get("debounce_k") or 1)
+    row.update(window_frames=1, window_ms=frame_s * 1000.0, decision_frames=k)
     return Evaluation(row=row, delays_ms=delays, split=m["split"])
 
 

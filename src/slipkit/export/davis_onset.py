@@ -3,12 +3,14 @@
 The whole rule fits in one graph on the runtime's event frame (counts per pixel,
 ``(batch, 2, H, W)``, positive then negative), no preprocessing op:
 
-1. ``fired = frame > 0``; the fired 8-neighbours per pixel as a ``Conv`` with a 3 x 3
-   kernel of ones and a zero centre (float32: exact small integers); kept pixels
-   ``fired & neighbours >= min_neighbours``;
-2. in float64: the kept areas per polarity (``ReduceSum``) and, from the kept positive
-   pixels' row and column sums (``MatMul`` with the pixel coordinates), their
-   covariance and its ``curl``;
+1. in float32 (every value a small whole number, so exact): ``fired = frame > 0``;
+   one ``Conv`` grouped by polarity, a 3 x 3 kernel of ones with 9 at the centre and
+   a bias of ``-(8 + min_neighbours)``, clipped to [0, 1]: the kept pixels (fired
+   with at least ``min_neighbours`` fired 8-neighbours); per row, ``MatMul`` with
+   ``[1, x, x^2]`` (kept pixels and their sums of x and x^2);
+2. in float64, on those ``(batch, 2, H, 3)`` row sums only: ``MatMul`` with
+   ``[1, y, y^2]`` gives every area and first and second moment, then the positive
+   pixels' covariance and its ``curl`` in the order of ``onset_features``;
 3. the score :func:`~slipkit.baselines.davis_onset.onset_score`: > 0 is slip.
 
 :class:`DavisOnsetScores` is the estimator side of the parity check (the detector's
@@ -96,45 +98,52 @@ def export_davis_onset(
     d = scores.detector
     h, w = int(d.height_px), int(d.width_px)
     g = GraphBuilder("davis_onset_rule", opset)
+    # 1. whole-image work in float32 (every value a small whole number, exact): the
+    #    fired pixels, then 9 x fired + fired 8-neighbours - (8 + min_neighbours) as
+    #    one Conv grouped by polarity (>= 1 exactly when the pixel fired with enough
+    #    fired neighbours: the neighbours alone are <= 8), clipped to the kept mask.
+    #    Grouped, the Conv keeps onnxruntime's plain kernel (a one-channel Conv on a
+    #    (2 batch, 1, H, W) reshape is laid out to NCHWc and back, twice as slow).
     fired = g.op("Cast", g.op("Greater", INPUT, g.const(0.0)), to=FLOAT)
-    flat = g.op("Reshape", fired, g.const([-1, 1, h, w], np.int64))
+    kernel = NEIGHBOURS + 9.0 * (NEIGHBOURS == 0)
+    bias = -8.0 - float(d.min_neighbours)
     count = g.op(
-        "Conv", flat, g.const(NEIGHBOURS[None, None]), pads=[1, 1, 1, 1], stem="nb"
+        "Conv",
+        fired,
+        g.const(np.stack([kernel[None], kernel[None]])),  # (2, 1, 3, 3)
+        g.const([bias, bias]),
+        pads=[1, 1, 1, 1],
+        group=2,
+        stem="nb",
     )
-    enough = g.op(
-        "Cast", g.op("Greater", count, g.const(d.min_neighbours - 0.5)), to=FLOAT
+    keep = g.op("Clip", count, g.const(0.0), g.const(1.0), stem="keep")
+    # per row: kept pixels, their sum of x and of x^2 (<= 190, 18 000, 2.3e6: exact)
+    x = np.arange(w, dtype=np.float64)
+    per_row = g.op(
+        "MatMul", keep, g.const(np.stack([np.ones(w), x, x * x], axis=1))
+    )  # (b, 2, H, 3)
+    # 2. in float64 on the reduced (b, 2, H, 3): [1, y, y^2] over the rows gives
+    #    M[p, i, j] = sum of y^i x^j over the kept pixels of polarity p
+    y = np.arange(h, dtype=np.float64)
+    moments = g.op(
+        "MatMul",
+        g.const(np.stack([np.ones(h), y, y * y]), np.float64),
+        g.op("Cast", per_row, to=DOUBLE),
+    )  # (b, 2, 3, 3)
+    flat_m = g.op("Reshape", moments, g.const([-1, 18], np.int64))
+    names = [g._fresh("m") for _ in range(18)]
+    g.nodes.append(
+        helper.make_node("Split", [flat_m, g.const([1] * 18, np.int64)], names, axis=1)
     )
-    keep32 = g.op(
-        "Reshape", g.op("Mul", flat, enough), g.const([-1, 2, h, w], np.int64)
-    )
-    keep = g.op("Cast", keep32, to=DOUBLE, stem="keep")
-    areas = g.op("ReduceSum", keep, g.const([2, 3], np.int64), keepdims=0)  # (b, 2)
-
-    def col(i: int) -> str:
-        return g.op("Slice", areas, *(g.const([v], np.int64) for v in (i, i + 1, 1)))
-
-    pos_area, neg_area = col(0), col(1)  # (b, 1)
-    pos = g.op(
-        "Squeeze",
-        g.op("Slice", keep, *(g.const([v], np.int64) for v in (0, 1, 1))),
-        g.const([1], np.int64),
-    )  # (b, H, W)
-    x = np.arange(w, dtype=np.float64)[:, None]
-    y = np.arange(h, dtype=np.float64)[:, None]
-    rows = g.op("ReduceSum", pos, g.const([2], np.int64), keepdims=0)  # (b, H)
-    cols = g.op("ReduceSum", pos, g.const([1], np.int64), keepdims=0)  # (b, W)
+    pos_area, sx, sxx = names[0], names[1], names[2]  # (b, 1) each
+    sy, sxy, syy = names[3], names[4], names[6]
+    neg_area = names[9]
     n = g.op("Max", pos_area, g.const([1.0], np.float64))
-
-    def mean(a: str, v: NDArray[np.float64]) -> str:
-        return g.op("Div", g.op("MatMul", a, g.const(v, np.float64)), n)
-
-    mx, my = mean(cols, x), mean(rows, y)
-    vx = g.op("Sub", mean(cols, x * x), g.op("Mul", mx, mx))
-    vy = g.op("Sub", mean(rows, y * y), g.op("Mul", my, my))
-    px = g.op(
-        "Squeeze", g.op("MatMul", pos, g.const(x, np.float64)), g.const([2], np.int64)
-    )
-    cxy = g.op("Sub", mean(px, y), g.op("Mul", mx, my))
+    # the order of onset_features' operations (same rounding on the same sums)
+    mx, my = g.op("Div", sx, n), g.op("Div", sy, n)
+    vx = g.op("Sub", g.op("Div", sxx, n), g.op("Mul", mx, mx))
+    vy = g.op("Sub", g.op("Div", syy, n), g.op("Mul", my, my))
+    cxy = g.op("Sub", g.op("Div", sxy, n), g.op("Mul", mx, my))
     det_c = g.op("Sub", g.op("Mul", vx, vy), g.op("Mul", cxy, cxy))
     root = g.op("Sqrt", g.op("Max", det_c, g.const([0.0], np.float64)))
     curl = g.op("Div", g.op("Mul", root, g.const([12.0], np.float64)), n, stem="curl")
@@ -190,11 +199,16 @@ def deploy_davis_onset(
     width_px)``, window 1, hop 1, at ``1 / frame_s`` Hz, no preprocessing. Before
     anything is written, the features of every held-out frame are checked equal to the
     detector's own (``DavisOnset.frames`` on the events). Slip class ``"1"`` (score
-    > 0); debounce from the options (default 2).
+    > 0); debounce :func:`~slipkit.export.deploy_davis.davis_debounce` (the run's
+    chosen one).
     """
     from slipkit.errors import SlipkitError
     from slipkit.export.deploy import Deployment
-    from slipkit.export.deploy_davis import DAVIS_REPLAY_BYTES, _davis_held_out
+    from slipkit.export.deploy_davis import (
+        DAVIS_REPLAY_BYTES,
+        _davis_held_out,
+        davis_debounce,
+    )
 
     det = run.model
     scores = DavisOnsetScores(detector=det).fit()
@@ -229,7 +243,7 @@ def deploy_davis_onset(
         preprocessing=[],
         export_options={},
         positive="1",
-        debounce_k=int(options.get("debounce_k") or 2),
+        debounce_k=davis_debounce(run, options),
         trials=trials,
         model=scores,
         max_replay_frames=max(1, DAVIS_REPLAY_BYTES // (8 * 2 * h * w)),

@@ -54,6 +54,17 @@ def davis_event_frames(
     return frames, times
 
 
+def davis_debounce(run: Run, options: Mapping[str, Any]) -> int:
+    """The debounce a DAVIS bundle deploys: the export's ``debounce_k``, else the run's
+    operating point (chosen on its training trials by ``DavisRelease``), else 1."""
+    k = options.get("debounce_k")
+    if k is None:
+        k = (run_metrics(run).get("operating_point") or {}).get("debounce_k")
+    if k is None:
+        k = getattr(run.model, "debounce_k_", None)
+    return int(k) if k is not None else 1
+
+
 def _davis_held_out(
     task: Any,
     run: Run,
@@ -118,8 +129,8 @@ def _deploy_davis(
     components), gives the filtered areas; the graph is the polarity rule on them
     (:class:`slipkit.export.davis.DavisAreaRule`). Before anything is written, the
     op's areas are checked to equal the detector's (``DavisPolarity.frames``) on
-    every held-out frame. Slip class ``"1"``; debounce 1 (the paper declares slip
-    on one frame).
+    every held-out frame. Slip class ``"1"``; debounce :func:`davis_debounce` (the
+    run's chosen one).
     """
     from slipkit.baselines.davis import DavisPolarity
     from slipkit.baselines.davis_onset import DavisOnset
@@ -196,7 +207,7 @@ def deploy_area_rule(
         preprocessing=[step],
         export_options={},
         positive="1",
-        debounce_k=int(options.get("debounce_k") or 1),
+        debounce_k=davis_debounce(run, options),
         trials=trials,
         model=rule,
         max_replay_frames=max(1, DAVIS_REPLAY_BYTES // (8 * n_values)),
@@ -223,7 +234,7 @@ def _deploy_davis_events(
     :class:`slipkit.export.events.EventFrameScores` (the classifier scoring event
     frames); before anything is written, its features of every held-out frame are
     checked equal to the classifier's own (``frame_features`` on the events). Slip
-    class ``"1"`` (logit >= 0); debounce 1.
+    class ``"1"`` (logit >= 0); debounce :func:`davis_debounce` (the run's chosen one).
     """
     from slipkit.export.events import EventFrameScores
     from slipkit.train.tasks.davis import DavisRelease
@@ -262,7 +273,7 @@ def _deploy_davis_events(
         preprocessing=[],
         export_options={},
         positive="1",
-        debounce_k=int(options.get("debounce_k") or 1),
+        debounce_k=davis_debounce(run, options),
         trials=trials,
         model=scores,
         max_replay_frames=max(1, DAVIS_REPLAY_BYTES // (8 * 2 * h * w)),

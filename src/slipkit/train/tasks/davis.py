@@ -7,10 +7,12 @@ counted per bin (TN ignored), precision, sensitivity and F1 follow (eqs. 1-3), a
 latency is the time from the onset to the first true-positive detection. Like the paper's
 Table 1, the headline is the mean over trials (experiments); pooled counts are reported too.
 Beside the bins, the trial events of every detection comparison
-(:mod:`slipkit.evaluate.events`, ``test.operating_point``): each frame the detector
-declares slip is an alarm (the rule's own decision, debounce 1), against the onset.
-The detector has nothing to learn, so ``fit`` only checks it on the training trials and
-every number comes from the held-out ones.
+(:mod:`slipkit.evaluate.events`, ``test.operating_point``): an alarm at the ``k``-th
+consecutive frame the detector declares slip, against the onset. The debounce ``k`` is
+chosen on the training trials (``operating_point``: the candidates, the cost and its
+limits) and the test trials are scored once at it. A rule has nothing to learn, so
+``fit`` only checks it on the training trials and every number comes from the held-out
+ones.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from numpy.typing import NDArray
 
 from slipkit.baselines.davis import DavisPolarity as _DavisPolarity
 from slipkit.baselines.davis import bin_scores, contact_end, prf
@@ -31,9 +34,13 @@ from slipkit.data.splits import split_by_trial
 from slipkit.errors import SlipkitError
 from slipkit.evaluate.events import (
     Cost,
+    Limits,
+    OperatingPoint,
     TrialTruth,
+    choose_operating_point,
     evaluate_point,
     events_table,
+    parse_operating_point,
     slipped_of,
 )
 from slipkit.models.events import EventFrameClassifier as _EventFrameClassifier
@@ -68,6 +75,13 @@ class DavisRelease(Task):
         Incipient slip onset (s).
     group : str
         Group column for the per-object breakdown.
+    operating_point : mapping or None
+        How the deployed debounce is chosen on the training trials: ``debounce``
+        (candidate k: an alarm at the k-th consecutive slip frame), ``cost``
+        (``{miss, early_alarm, delay_ms}``), ``max_early_alarm_rate``,
+        ``max_alarms_per_disturbance`` (:mod:`slipkit.evaluate.events`; ``thresholds``
+        is not used: the detector's own per-frame decision is the score); None:
+        debounce 1 (the detector's decision on one frame), default cost.
 
     The objective, ``validation.mean.f1``, is the F1 on the training trials: the
     detector's rule is fixed (``fit`` only checks parameters and events, nothing is
@@ -92,6 +106,7 @@ class DavisRelease(Task):
         area_column: str = "area_px",
         label: str = "slip_onset_s",
         group: str = "object",
+        operating_point: Mapping[str, Any] | None = None,
     ) -> None:
         self.bin_s = bin_s
         self.test_size = test_size
@@ -100,6 +115,17 @@ class DavisRelease(Task):
         self.area_column = area_column
         self.label = label
         self.group = group
+        self.operating_point = parse_operating_point(operating_point)
+
+    @property
+    def cost(self) -> Cost:
+        """The cost weights of the trial events (``operating_point.cost``)."""
+        return (self.operating_point or {}).get("cost") or Cost()
+
+    @property
+    def limits(self) -> Limits:
+        """The limits the debounce is chosen within (``operating_point``)."""
+        return (self.operating_point or {}).get("limits") or Limits()
 
     def _events(self, trial: Trial) -> pd.DataFrame:
         if self.stream not in trial.streams:
@@ -223,12 +249,10 @@ class DavisRelease(Task):
         out["by_group"] = {str(g): block(p) for g, p in table.groupby("group")}
         return out
 
-    def trial_events(
+    def _truths_scores(
         self, dataset: Dataset, frames: pd.DataFrame
-    ) -> tuple[dict[str, Any], pd.DataFrame]:
-        """The trial events of the detector's slip frames (an alarm at the end of every
-        frame it declares slip, debounce 1; :mod:`slipkit.evaluate.events`): the
-        ``operating_point`` summary and the per-trial table."""
+    ) -> tuple[list[TrialTruth], list[NDArray[np.float64]]]:
+        """Each trial's truth and its frames' slip decisions (1: slip) at the frame ends."""
         truths, scores = [], []
         for trial in dataset:
             f = frames[frames["trial_id"] == trial.trial_id] if len(frames) else frames
@@ -239,9 +263,61 @@ class DavisRelease(Task):
                 TrialTruth(trial.trial_id, t, slipped_of(trial.labels, onset), onset)
             )
             scores.append(f["slip"].to_numpy(np.float64) if len(f) else np.empty(0))
-        summary, events = evaluate_point(truths, scores, 0.5, 1, Cost())
-        point = {"threshold": float("nan"), "debounce_k": 1, **summary}
-        return point, events_table(events, Cost())
+        return truths, scores
+
+    def trial_events(
+        self, dataset: Dataset, frames: pd.DataFrame, debounce_k: int = 1
+    ) -> tuple[dict[str, Any], pd.DataFrame]:
+        """The trial events of the detector's slip frames (an alarm at the
+        ``debounce_k``-th consecutive frame it declares slip;
+        :mod:`slipkit.evaluate.events`): the ``operating_point`` summary and the
+        per-trial table."""
+        truths, scores = self._truths_scores(dataset, frames)
+        summary, events = evaluate_point(truths, scores, 0.5, debounce_k, self.cost)
+        point = {"threshold": float("nan"), "debounce_k": int(debounce_k), **summary}
+        return point, events_table(events, self.cost)
+
+    def choose_debounce(
+        self, dataset: Dataset, frames: pd.DataFrame
+    ) -> OperatingPoint | None:
+        """The debounce of lowest mean cost within the limits on these (training)
+        trials' frames (:func:`~slipkit.evaluate.events.choose_operating_point`, the
+        threshold fixed at the detector's decision); None without ``operating_point``."""
+        if self.operating_point is None:
+            return None
+        truths, scores = self._truths_scores(dataset, frames)
+        return choose_operating_point(
+            truths,
+            scores,
+            thresholds=[0.5],
+            debounce_ks=self.operating_point["debounce"],
+            cost=self.cost,
+            limits=self.limits,
+        )
+
+    def _source(self, n_trials: int, learned: bool) -> str:
+        c, lim = self.cost, self.limits
+        limits = (
+            f", early alarms <= {lim.max_early_alarm_rate * 100:g} % of trials"
+            if lim.max_early_alarm_rate is not None
+            else ""
+        )
+        if lim.max_alarms_per_disturbance is not None:
+            limits += (
+                f", alarms on <= {lim.max_alarms_per_disturbance * 100:g} % of "
+                "disturbances"
+            )
+        what = (
+            "the trials the classifier was fitted on (in-sample)"
+            if learned
+            else "trials the rule learns nothing from"
+        )
+        return (
+            f"lowest mean trial cost (miss {c.miss:g}, early alarm {c.early_alarm:g}, "
+            f"{c.delay_ms:g} per ms of delay{limits}) over debounce "
+            f"{self.operating_point['debounce'] if self.operating_point else [1]} on "
+            f"the {n_trials} training trials, {what}"
+        )
 
     def fit(self, model: Any, dataset: Dataset, *, seed: int, out: Path) -> TaskResult:
         split = split_by_trial(dataset, test_size=self.test_size, seed=seed)
@@ -254,10 +330,24 @@ class DavisRelease(Task):
             model.fit(X, segments=seg, onsets=onsets, ends=ends)
         else:  # the rule: fit checks parameters and events, nothing is learned
             model.fit(X, segments=seg)
+        train_table, train_frames = self.trial_table(model, train)
+        chosen = self.choose_debounce(train, train_frames)
+        k = chosen.debounce_k if chosen is not None else 1
+        model.debounce_k_ = k  # the deployed debounce; evaluate scores at it
+        record = (
+            {**chosen.record(self._source(len(train), learned)), "threshold": None}
+            if chosen is not None
+            else {
+                "threshold": None,
+                "debounce_k": 1,
+                "from": "fixed: the detector's own rule, debounce 1",
+            }
+        )
+        # the test side, scored once at the chosen debounce
         table, frames = self.trial_table(model, test)
         table.to_csv(out / "davis_trials.csv", index=False)
         frames.to_csv(out / "test_frames.csv", index=False)
-        point, events = self.trial_events(test, frames)
+        point, events = self.trial_events(test, frames, k)
         events.to_csv(out / "test_events.csv", index=False)
         metrics = {
             "split": {"train": list(split.train), "test": list(split.test)},
@@ -269,14 +359,10 @@ class DavisRelease(Task):
                 if learned
                 else "none: a fixed rule (fit learns nothing), scored on the "
                 "training trials",
-                **self.summarise(self.trial_table(model, train)[0]),
+                **self.summarise(train_table),
             },
             "test": {**self.summarise(table), "operating_point": point},
-            "operating_point": {
-                "threshold": None,
-                "debounce_k": 1,
-                "from": "fixed: the detector's own rule, debounce 1",
-            },
+            "operating_point": record,
         }
         return TaskResult(model, metrics, _summary(metrics))
 
@@ -284,7 +370,8 @@ class DavisRelease(Task):
         table, frames = self.trial_table(model, dataset)
         table.to_csv(out / "davis_trials.csv", index=False)
         frames.to_csv(out / "frames.csv", index=False)
-        point, events = self.trial_events(dataset, frames)
+        k = int(getattr(model, "debounce_k_", 1))  # the run's chosen debounce
+        point, events = self.trial_events(dataset, frames, k)
         events.to_csv(out / "events.csv", index=False)
         return {
             "paper": PAPER,
@@ -294,7 +381,7 @@ class DavisRelease(Task):
 
 def _summary(metrics: Mapping[str, Any]) -> list[str]:
     t = metrics["test"]
-    m, lat = t["mean"], t["latency_ms"]
+    m, lat, op = t["mean"], t["latency_ms"], t["operating_point"]
     return [
         f"DAVIS event-polarity detector, {t['n_trials']} test trials, "
         f"{metrics['bin_s'] * 1e3:.0f} ms bins (mean over trials):",
@@ -305,6 +392,9 @@ def _summary(metrics: Mapping[str, Any]) -> list[str]:
         f"{PAPER['f1']:>6.2f}{PAPER['latency_ms']:>10.1f} ({PAPER['latency_sd_ms']:.1f})",
         f"  latency under 10 ms: {lat['under_10ms']}/{t['n_trials']} trials "
         f"(paper: 11/37); missed: {lat['missed']}",
+        f"  trial events at debounce {op['debounce_k']}: detected "
+        f"{op['detected_rate'] * 100:.0f} %, early alarms "
+        f"{op['early_alarm_rate'] * 100:.0f} %, cost {op['cost']:.3f} per trial",
     ]
 
 
