@@ -145,6 +145,7 @@ def test_davis_learned_frames_beside_the_polarity_rule(tmp_path: Path) -> None:
     assert {
         "polarity_lines": "analytic",
         "polarity_square": "analytic",
+        "onset": "analytic",
         "event_logreg": "learned",
     } == kinds
     assert True == bool((df["export"] == "ok").all())  # noqa: E712 - all export (issue 14)
