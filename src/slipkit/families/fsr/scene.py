@@ -6,7 +6,7 @@ over the whole sensor surface in a set time (Table 1: 1.2-4.7 N, 1-5 s); the con
 voltage is sampled at 2 kHz. The backbone is the static contact (the probe pressed from
 the first sample, leaving the sensor at the end of the pass) seen through the inverse of
 the calibration eq. 6; the touch (press), the slip vibrations and the impulsive
-disturbances are effects (:mod:`slipkit.sim.effects.fsr`). See ``docs/simulation/fsr.md``.
+disturbances are effects (:mod:`slipkit.families.fsr.effects`). See ``docs/simulation/fsr.md``.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from slipkit.data.dataset import LabelSpec, StreamSpec
-from slipkit.physics.fsr import (
+from slipkit.families.fsr.physics import (
     DEFAULT_CALIBRATION,
     OUTPUT_RANGE_V,
     max_force,
@@ -63,7 +63,7 @@ class FSRProbeSlide:
     normal_force_N : float or [low, high]
         Probe normal force (N), drawn per trial; Table 1: 1.2, 3.6, 4.7 N.
     calibration : list of 5 floats
-        ``p1..p5`` of eq. 6, F (N) from V (V); default: see :mod:`slipkit.physics.fsr`.
+        ``p1..p5`` of eq. 6, F (N) from V (V); default: see :mod:`slipkit.families.fsr.physics`.
     output_range_V : [low, high]
         The conditioned output's range (V).
     """

@@ -1,6 +1,6 @@
 """FSR slip onset in 2 ms: a stick-slip release told from a knock by its shape.
 
-A slipkit addition beside the paper's detector (:mod:`slipkit.baselines.fsr`), built
+A slipkit addition beside the paper's detector (:mod:`slipkit.families.fsr.touch_slip`), built
 for delay. The paper's rule fires on any steep release, so a sharp external knock
 (+-15-50 % of the grip, 1-5 ms edges) fires it as often as a slip does; the confirmed
 variant (three peaks within 0.4 s) waits for a train of stick-slip events and is late.
@@ -19,7 +19,7 @@ Both detectors here read the signed signal ``s = sign (v - v_rest)`` (slip posit
 ``sign`` +1 for the paper's falling wiring, -1 for a rising one), ``v_rest`` the mean
 of the recording's first ``rest_samples`` samples and the sign fitted or latched at the
 recording's first sample further than ``delta`` from rest, as
-:class:`~slipkit.baselines.fsr.FSRTouchSlip` with one-sample blocks; deployed, the
+:class:`~slipkit.families.fsr.touch_slip.FSRTouchSlip` with one-sample blocks; deployed, the
 runtime op ``press_sign`` makes ``s`` on the gripper PC (``block`` 1). Per sample ``n``
 the candidate release ends ``m = round(rebound_s rate_hz)`` samples back, at
 ``k = n - m``, and spans ``e = round(edge_s rate_hz)`` samples:
@@ -67,14 +67,14 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
 from slipkit.baselines.base import FloatArray, StreamDetector, segment_bounds
-from slipkit.baselines.fsr import (
+from slipkit.baselines.generic import OnsetCalibration
+from slipkit.errors import SlipkitError
+from slipkit.families.fsr.touch_slip import (
     DEFAULT_DELTA,
     PRESS_DIRECTION,
     FSRTouchSlip,
     _sequential_sum,
 )
-from slipkit.baselines.generic import OnsetCalibration
-from slipkit.errors import SlipkitError
 
 #: The learned detector's shape features are clipped to +-FEATURE_CLIP releases (a
 #: tiny release would otherwise make them unbounded).
@@ -137,9 +137,9 @@ class FSROnset(OnsetCalibration, StreamDetector):
         Samples at the start of each recording averaged into ``v_rest`` (the paper's 10).
     delta : float or None
         Touch threshold: the FSR is touched where ``sign (v_rest - v) >= delta`` (V);
-        None: 0.2 V (:data:`~slipkit.baselines.fsr.DEFAULT_DELTA`).
+        None: 0.2 V (:data:`~slipkit.families.fsr.touch_slip.DEFAULT_DELTA`).
     polarity : {"auto", "falling", "rising", "per_recording"}
-        The wiring, as :class:`~slipkit.baselines.fsr.FSRTouchSlip`'s (``"auto"``:
+        The wiring, as :class:`~slipkit.families.fsr.touch_slip.FSRTouchSlip`'s (``"auto"``:
         learned by ``fit``; training recordings of both wirings give
         ``"per_recording"``: each recording's first sample further than ``delta``
         from rest sets its sign).
@@ -176,7 +176,7 @@ class FSROnset(OnsetCalibration, StreamDetector):
     Attributes
     ----------
     polarity_, polarity_votes_, rest_V_
-        As :class:`~slipkit.baselines.fsr.FSRTouchSlip`'s.
+        As :class:`~slipkit.families.fsr.touch_slip.FSRTouchSlip`'s.
     delta_ : float
         The touch threshold used (V).
     threshold_, classes_, roc_fpr_, roc_tpr_, roc_thresholds_, auc_, tpr_, tnr_, fpr_, fnr_, n_features_in_
@@ -312,7 +312,7 @@ class FSROnset(OnsetCalibration, StreamDetector):
 
         See :meth:`StreamDetector.fit <slipkit.baselines.base.StreamDetector.fit>`;
         the polarity rules (and their refusals) are
-        :class:`~slipkit.baselines.fsr.FSRTouchSlip`'s.
+        :class:`~slipkit.families.fsr.touch_slip.FSRTouchSlip`'s.
         """
         self._validate_params()
         Xv = self._check_X(X, reset=True)

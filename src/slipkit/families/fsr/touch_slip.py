@@ -12,7 +12,7 @@ Three stages on the conditioned FSR voltage sampled at 2 kHz (paper Sec. 2.3, Fi
 3. **slip** -- ``slip = 1`` when ``v'_mean >= alpha`` (eq. 5). Only one sign counts: a
    rising voltage (a pressure release) for ``input="voltage"``, a falling force for
    ``input="force"`` (the force comes from the eq. 6 polynomial,
-   :func:`slipkit.physics.fsr.force_from_voltage`), so the press of a touch is never slip.
+   :func:`slipkit.families.fsr.physics.force_from_voltage`), so the press of a touch is never slip.
 
 ``alpha`` is :attr:`threshold_`, chosen on the ROC by ``fit`` (an alpha equal to a
 training score, as a ROC choice is, moves halfway down to the next lower training score,
@@ -51,7 +51,7 @@ on the gripper PC, as this class takes each recording's: the runtime op ``press_
 (:mod:`slipkit.runtime.preprocessing`) with the fitted sign or, with
 ``"per_recording"``, the sign latched at the first press as this class does, and the
 graph reads the sign-normalised signal
-(:func:`slipkit.export.detectors.export_fsr_touch_slip`).
+(:func:`slipkit.families.fsr.export.touch_slip.export_fsr_touch_slip`).
 
 **Confirmation (``confirm_events``, a slipkit addition against impulsive bumps).** One
 sharp external bump (tens of % of the holding force in a millisecond) gives one large
@@ -83,7 +83,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from slipkit.baselines.base import FloatArray, StreamDetector, segment_bounds
 from slipkit.errors import SlipkitError, SlipkitWarning
-from slipkit.physics.fsr import DEFAULT_CALIBRATION
+from slipkit.families.fsr.physics import DEFAULT_CALIBRATION
 
 #: The voltage direction under a press for each wiring: -1 falls (the paper), +1 rises.
 PRESS_DIRECTION = {"falling": -1.0, "rising": 1.0}
@@ -136,7 +136,7 @@ class FSRTouchSlip(StreamDetector):
         calibration, far above the noise.
     calibration : sequence of 5 floats or None
         ``p1..p5`` of eq. 6 (N from V) for ``input="force"``; None: the default
-        :data:`slipkit.physics.fsr.DEFAULT_CALIBRATION`.
+        :data:`slipkit.families.fsr.physics.DEFAULT_CALIBRATION`.
     polarity : {"auto", "falling", "rising", "per_recording"}
         How the conditioned voltage moves when the FSR is pressed: ``"falling"`` (the
         paper's divider), ``"rising"`` (the other common wiring), ``"per_recording"``
