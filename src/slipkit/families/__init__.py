@@ -149,6 +149,7 @@ FAMILIES: dict[str, Family] = {
             comparisons=("sliptack", "sliptack_slip"),
             scenario="sliptack",
             docs=("simulation/sliptack.md", "baselines/sliptack.md"),
+            detectors=tuple(_ST + m for m in ("speed", "accel", "onset", "torsion")),
         ),
         Family(
             name="davis",
