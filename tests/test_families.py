@@ -102,3 +102,53 @@ def test_plugin_modules_are_family_folders_and_register_when_loaded() -> None:
     assert "sliptack" in SCENARIOS
     assert get_scenario("sliptack") is not None
     assert speed.StickSlipSpeed in analytic_estimators()
+
+
+def test_fsr_folder_registers_its_effects_scenario_exporters_and_gate_margin() -> None:
+    """The stages find the FSR family's parts through the plug-in modules: its effects,
+    its closed-loop scenario, the exporters and runtime steps of its detectors and the
+    parity check's gate margin of its touch-and-slip graph."""
+    from slipkit.closedloop.scenarios import SCENARIOS, get_scenario
+    from slipkit.export.detector_parity import _GATE_MARGINS
+    from slipkit.export.registry import _RUNTIME_STEPS, exporter_for
+    from slipkit.families import load_plugins
+    from slipkit.sim.core import EFFECTS
+
+    for kind in PLUGIN_MODULES:
+        load_plugins(kind)
+    from slipkit.families.fsr.onset import FSROnset, FSROnsetLogistic
+    from slipkit.families.fsr.touch_slip import FSRTouchSlip
+
+    assert {
+        "fsr_slip_events",
+        "fsr_disturbance",
+        "fsr_impulse_disturbance",
+        "fsr_touch",
+        "fsr_polarity",
+    } <= set(EFFECTS)
+    assert "fsr" in SCENARIOS
+    assert get_scenario("fsr") is not None
+    for cls in (FSRTouchSlip, FSROnset, FSROnsetLogistic):
+        assert exporter_for(cls()) is not None
+        assert _RUNTIME_STEPS.for_class(cls) is not None
+    assert _GATE_MARGINS.for_class(FSRTouchSlip) is not None
+
+
+def test_family_detector_modules_train_in_the_detector_slot() -> None:
+    """A family folder's detectors (``Family.detectors``) train in a comparison's detector
+    slot and carry the analytic kind in the model card, as ``slipkit.baselines``'s do;
+    learned models do not."""
+    from slipkit.compare.commands import _is_analytic
+    from slipkit.families import detector_module
+
+    fsr = "slipkit.families.fsr."
+    assert detector_module(fsr + "touch_slip")
+    assert detector_module(fsr + "onset")
+    assert detector_module("slipkit.baselines.biotac")
+    assert detector_module("slipkit.families.sliptack.speed")
+    assert not detector_module("slipkit.families.sliptack.spectral")
+    assert not detector_module(fsr + "export.touch_slip")
+    assert not detector_module("slipkit.models.window_detector")
+    node = {"_target_": fsr + "touch_slip.FSRTouchSlip"}
+    assert _is_analytic("fsr_roc", node, [])
+    assert not _is_analytic("m", {"_target_": "slipkit.models.window.WindowMLP"}, [])

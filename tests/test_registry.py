@@ -94,8 +94,6 @@ def test_runtime_steps_come_from_the_detector_class_not_the_deployer():
     registration is refused."""
     import slipkit.export  # noqa: F401  (registers every family's exporters)
     from slipkit.baselines.biotac import PressureVibration
-    from slipkit.baselines.fsr import FSRTouchSlip
-    from slipkit.baselines.fsr_onset import FSROnset, FSROnsetLogistic
     from slipkit.export.registry import (
         _RUNTIME_STEPS,
         ExportError,
@@ -104,6 +102,8 @@ def test_runtime_steps_come_from_the_detector_class_not_the_deployer():
         register_runtime_steps,
         runtime_steps,
     )
+    from slipkit.families.fsr.onset import FSROnset, FSROnsetLogistic
+    from slipkit.families.fsr.touch_slip import FSRTouchSlip
 
     assert {FSRTouchSlip, PressureVibration, FSROnset} <= set(_RUNTIME_STEPS)
     assert _RUNTIME_STEPS.for_class(FSROnsetLogistic) is _RUNTIME_STEPS[FSROnset]

@@ -24,8 +24,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from slipkit.baselines.fsr import FSRTouchSlip, PolarityWarning
 from slipkit.errors import SlipkitError
+from slipkit.families.fsr.touch_slip import FSRTouchSlip, PolarityWarning
 from slipkit.families.sliptack.speed import (
     FixedNormalForceWarning,
     StickSlipSpeed,
@@ -257,8 +257,8 @@ def test_per_recording_polarity_detects_either_wiring_and_streams_alike(
 
 def test_per_recording_polarity_exports_with_the_press_sign_op() -> None:
     """A per-recording sign exports: the graph asks the runtime for press_sign first
-    (parity: tests/export/test_fsr_press_sign.py)."""
-    from slipkit.export.detectors import export_fsr_touch_slip
+    (parity: tests/families/fsr/test_press_sign.py)."""
+    from slipkit.families.fsr.export.touch_slip import export_fsr_touch_slip
 
     X, y, seg = stack(fsr_trials(100, 2, polarity="rising", slide=True))
     det = FSRTouchSlip(threshold=8.0, polarity="per_recording").fit(X, y, segments=seg)
@@ -298,7 +298,8 @@ def test_batch_equals_streaming_for_either_polarity(
 @pytest.mark.parametrize("polarity", ["falling", "rising"])
 def test_onnx_graph_agrees_for_either_polarity(polarity: str) -> None:
     """The exported FSR graph (rest from fit) passes parity on generated recordings."""
-    from slipkit.export.detectors import check_detector_parity, export_fsr_touch_slip
+    from slipkit.export.detectors import check_detector_parity
+    from slipkit.families.fsr.export.touch_slip import export_fsr_touch_slip
 
     det = fit_on_slides(polarity)
     X, _, seg = stack(fsr_trials(400, 3, polarity=polarity, slide=True))
@@ -311,7 +312,8 @@ def test_onnx_graph_agrees_for_either_polarity(polarity: str) -> None:
 @pytest.mark.parametrize("polarity", ["falling", "rising"])
 def test_confirmed_graph_agrees_on_slides_and_bumps(polarity: str) -> None:
     """The confirmed variant's graph (k-th largest peak over the window) passes parity, slides and bumps."""
-    from slipkit.export.detectors import check_detector_parity, export_fsr_touch_slip
+    from slipkit.export.detectors import check_detector_parity
+    from slipkit.families.fsr.export.touch_slip import export_fsr_touch_slip
 
     det = fit_on_slides(polarity, **ROBUST)
     trials = fsr_trials(400, 2, polarity=polarity, slide=True) + fsr_trials(

@@ -9,11 +9,11 @@ def test_logistic_onset_detectors_are_learned_and_rules_analytic() -> None:
     """The FSR and SlipTack logistic onset detectors show as learned, their rules as analytic,
     and a model in the model slot as learned."""
     kinds = [
-        _kind({"_target_": "slipkit.baselines.fsr_onset.FSROnsetLogistic"}, True),
+        _kind({"_target_": "slipkit.families.fsr.onset.FSROnsetLogistic"}, True),
         _kind(
             {"_target_": "slipkit.families.sliptack.onset.SlipTackOnsetLogistic"}, True
         ),
-        _kind({"_target_": "slipkit.baselines.fsr_onset.FSROnset"}, True),
+        _kind({"_target_": "slipkit.families.fsr.onset.FSROnset"}, True),
         _kind({"_target_": "slipkit.models.svm.TacTipSVM"}, False),
     ]
     assert ["learned", "learned", "analytic", "learned"] == kinds

@@ -16,7 +16,6 @@ from scipy.signal import butter, sosfilt, sosfilt_zi
 
 from slipkit import config_dir
 from slipkit.baselines.biotac import ForceDerivative, PressureVibration
-from slipkit.baselines.fsr import FSRTouchSlip
 from slipkit.data import Dataset
 from slipkit.export import ExportError, exporter_for
 from slipkit.export.detectors import (
@@ -25,7 +24,6 @@ from slipkit.export.detectors import (
     check_detector_parity,
     detector_windows,
     export_force_derivative,
-    export_fsr_touch_slip,
     export_pressure_vibration,
     graph_scores,
     pressure_baseline,
@@ -33,6 +31,8 @@ from slipkit.export.detectors import (
 )
 from slipkit.export.parity import onnx_session
 from slipkit.export.registry import IR_VERSION
+from slipkit.families.fsr.export.touch_slip import export_fsr_touch_slip
+from slipkit.families.fsr.touch_slip import FSRTouchSlip
 from slipkit.families.sliptack.export.torsion import export_torsional_slip
 from slipkit.families.sliptack.torsion import TorsionalSlipDetector
 from slipkit.sim.commands import build_scene
@@ -40,7 +40,7 @@ from slipkit.sim.commands import build_scene
 Arr = np.ndarray
 
 
-# -- simulated recordings (as tests/baselines/test_fsr.py and test_biotac_detectors.py) --
+# -- simulated recordings (as tests/families/fsr/test_touch_slip.py and test_biotac_detectors.py) --
 @lru_cache(maxsize=4)
 def simulated(scene: str, n: int, seed: int) -> Dataset:
     """``n`` trials of ``scene`` from its real config."""

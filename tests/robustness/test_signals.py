@@ -14,8 +14,8 @@ from hypothesis.extra.numpy import arrays
 
 from slipkit.baselines.biotac import ForceDerivative, PressureVibration
 from slipkit.baselines.davis import DavisPolarity
-from slipkit.baselines.fsr import FSRTouchSlip
 from slipkit.errors import SlipkitError
+from slipkit.families.fsr.touch_slip import FSRTouchSlip
 from slipkit.families.sliptack.accel import DropAcceleration
 from slipkit.families.sliptack.speed import (
     PAPER_F_MAX,

@@ -40,7 +40,6 @@ from omegaconf import DictConfig
 
 from slipkit._options import within
 from slipkit.closedloop.detectors import Detector
-from slipkit.closedloop.fsr import _draw
 from slipkit.closedloop.pinch import PinchTrial, load_profile, run_pinch_trial
 from slipkit.closedloop.plant import (
     FORCE_N,
@@ -57,7 +56,7 @@ from slipkit.closedloop.plant import (
     check_params,
 )
 from slipkit.closedloop.run import Outcome, speed_grid
-from slipkit.closedloop.scenarios import plant_params, register_scenario
+from slipkit.closedloop.scenarios import _draw, plant_params, register_scenario
 from slipkit.errors import SlipkitError
 from slipkit.physics.biotac import surface_point, tangent_frame
 from slipkit.sim.core import EFFECTS, Scene, SceneState, draw_effect_params, effect_name

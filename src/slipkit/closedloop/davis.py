@@ -54,11 +54,10 @@ import numpy as np
 from omegaconf import DictConfig
 
 from slipkit.closedloop.detectors import Detector
-from slipkit.closedloop.fsr import _draw, _span
 from slipkit.closedloop.pinch import load_profile
 from slipkit.closedloop.plant import G_M_S2, Actuator, PinchPlant, PlantState
 from slipkit.closedloop.run import Outcome, speed_grid
-from slipkit.closedloop.scenarios import plant_params, register_scenario
+from slipkit.closedloop.scenarios import _draw, _span, plant_params, register_scenario
 from slipkit.errors import SlipkitError
 from slipkit.sim.core import EFFECTS, Scene, SceneState, draw_effect_params, effect_name
 from slipkit.sim.scenes.davis import ContactPatch, DavisRelease

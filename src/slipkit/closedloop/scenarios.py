@@ -50,6 +50,8 @@ import importlib
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, Protocol, TypeVar, runtime_checkable
 
+import numpy as np
+
 import slipkit.families as _families
 from slipkit._registry import Registry
 from slipkit.errors import SlipkitError
@@ -100,6 +102,18 @@ _T = TypeVar("_T")
 SCENARIOS: Registry[str, type] = Registry(
     "closed-loop scenario", error=ValueError, key_type=str
 )
+
+
+def _span(value: Any) -> tuple[float, float]:
+    """A plant parameter given as one value or ``[lo, hi]``, as ``(lo, hi)``."""
+    items = list(value) if isinstance(value, list | tuple) else [value, value]
+    return float(items[0]), float(items[-1])
+
+
+def _draw(rng: np.random.Generator, value: Any) -> float:
+    """One draw of a plant parameter: the value, or uniform in ``[lo, hi]``."""
+    lo, hi = _span(value)
+    return lo if lo == hi else float(rng.uniform(lo, hi))
 
 
 def plant_params(scen: DictConfig) -> dict[str, Any]:

@@ -33,6 +33,7 @@ import pandas as pd
 from hydra.utils import get_class
 from omegaconf import DictConfig, OmegaConf
 
+import slipkit.families as _families
 from slipkit._files import atomic_dir, check_out_path
 from slipkit._options import SEEDS, check_value
 from slipkit.compare import plots
@@ -97,9 +98,8 @@ class Comparison:
 
 def _is_analytic(name: str, node: dict[str, Any], analytic: list[str]) -> bool:
     """Whether the estimator trains as a detector (``detector:`` slot of the train config)."""
-    return name in analytic or str(node.get("_target_", "")).startswith(
-        "slipkit.baselines."
-    )
+    module = str(node.get("_target_", "")).rpartition(".")[0]
+    return name in analytic or _families.detector_module(module)
 
 
 def _kind(node: dict[str, Any], analytic: bool) -> str:

@@ -23,7 +23,6 @@ from slipkit.export import detectors as _detectors  # noqa: F401  (registers exp
 from slipkit.export import events as _events  # noqa: F401
 from slipkit.export import force as _force  # noqa: F401
 from slipkit.export import frame_gru as _frame_gru  # noqa: F401
-from slipkit.export import fsr_onset as _fsr_onset  # noqa: F401
 from slipkit.export import generic as _generic  # noqa: F401
 from slipkit.export import sklearn as _sklearn  # noqa: F401
 from slipkit.export import svm as _svm  # noqa: F401

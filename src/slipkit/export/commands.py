@@ -40,6 +40,7 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 import slipkit
+import slipkit.families as _families
 from slipkit._files import check_out_path
 from slipkit.errors import SlipkitError
 
@@ -598,14 +599,14 @@ def _card(
     from slipkit._files import sha256_bytes
     from slipkit.export.card import model_card
 
-    # a class's own slipkit_kind tag (as slipkit compare reads it), else its package
+    # a class's own slipkit_kind tag (as slipkit compare reads it), else its module
     cls = type(run.model)
     tag = getattr(cls, "slipkit_kind", None)
     kind = (
         str(tag)
         if tag in ("analytic", "learned")
         else "analytic"
-        if cls.__module__.startswith("slipkit.baselines.")
+        if _families.detector_module(cls.__module__)
         else "learned"
     )
     rounds = int((cfg.get("session") or {}).get("rounds", 3))

@@ -5,6 +5,7 @@ feeds and at the instants it would decide.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -12,9 +13,9 @@ from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike, NDArray
 from sklearn.utils.validation import check_is_fitted
 
+from slipkit._registry import Registry
 from slipkit.baselines.base import StreamDetector, segment_bounds
-from slipkit.baselines.fsr import FSRTouchSlip
-from slipkit.export.detector_graph import _F32_MAX, NO_SCORE, DetectorGraph
+from slipkit.export.detector_graph import NO_SCORE, DetectorGraph
 from slipkit.export.parity import DEFAULT_EPS_REL, MIN_AGREEMENT, onnx_session
 from slipkit.export.registry import (
     ExportError,
@@ -96,42 +97,24 @@ def graph_scores(out: ArrayLike) -> NDArray[np.float64]:
     return np.where(s <= NO_SCORE, -np.inf, s)
 
 
-def _fsr_gate_margin(
-    detector: FSRTouchSlip,
-    graph: DetectorGraph,
-    x: NDArray[np.float64],
-    inst: NDArray[np.int64],
-) -> tuple[NDArray[np.float64], float]:
-    """|press - delta| of the batch detector at ``inst`` and |graph rest - recording rest|."""
-    spec = graph.features or {}
-    b = int(spec["block"])
-    if any(st.get("op") == "press_sign" for st in graph.preprocessing):
-        # the press_sign op gives the graph this recording's own rest (and, per
-        # recording, its sign): the batch detector's press per block, at the instants
-        # (block ends)
-        _, press_b = detector._block_stats(x[:, 0])
-        blk = (inst - (b - 1)) // b
-        press_i = np.full(len(inst), np.nan)
-        ok = blk < len(press_b)
-        press_i[ok] = press_b[blk[ok]]
-        # the graph reads sign * (v - rest) in float64 and sums a block in its own
-        # order: its press can differ from numpy's mean by a few float64 steps of the
-        # largest |v - rest|; allow one float32 step, far above that (no rest gap: the
-        # rest is the same)
-        head = x[: int(detector.rest_samples), 0]
-        finite = head[np.isfinite(head)]
-        dev = np.abs(x[:, 0] - np.mean(finite)) if finite.size else np.zeros(1)
-        top = float(np.max(dev[np.isfinite(dev)], initial=0.0))
-        return np.abs(press_i - float(spec["delta"])), float(
-            np.spacing(np.float32(min(top, _F32_MAX)))
-        )
-    sig = detector._signal(x[:, 0])
-    head = sig[: int(detector.rest_samples)]
-    finite = head[np.isfinite(head)]
-    rest = float(np.mean(finite)) if finite.size else np.nan
-    means = sliding_window_view(sig, b).mean(axis=1)[inst - (b - 1)]
-    press = detector._sign * (rest - means)
-    return np.abs(press - float(spec["delta"])), abs(float(spec["rest_signal"]) - rest)
+#: ``fn(detector, graph, x, instants) -> (margins, rest_gap)`` of a detector whose graph has a
+#: touch gate (``graph.features["gate"]``): per instant, how far the batch detector's gate
+#: input lies from the gate's threshold, and how far the graph's rest level is from the
+#: recording's (a disagreement within that distance of the gate passes parity).
+GateMargin = Callable[
+    [Any, DetectorGraph, NDArray[np.float64], NDArray[np.int64]],
+    tuple[NDArray[np.float64], float],
+]
+
+_GATE_MARGINS: Registry[type, GateMargin] = Registry(
+    "gate margin", error=ExportError, n_args=4, key_type=type
+)
+
+
+def register_gate_margin(cls: type, fn: GateMargin, *, overwrite: bool = False) -> None:
+    """Register the gate margin (:data:`GateMargin`) of a gated detector class's graphs,
+    beside its exporter; subclasses inherit the entry."""
+    _GATE_MARGINS.register(cls, fn, overwrite=overwrite)
 
 
 def check_detector_parity(
@@ -166,13 +149,12 @@ def check_detector_parity(
         Disagreements must lie within this distance of the threshold on the batch
         score. Default: 1e-4 x the largest finite |score|, at least 1e-4.
     gate_eps : float, optional
-        FSR graphs with the touch gate: a disagreement also passes when the batch
-        detector's ``press`` lies within ``gate_eps`` of ``delta`` (V or N), i.e. the
-        gate flipped because the graph's fixed rest differs from the recording's
-        rest mean. Default: the largest such difference over the recordings; with the
-        rest from the stream (``press_sign``) no rest differs, and the default is one
-        float32 step of the largest ``|v - rest|`` (far above the few float64 steps
-        by which the graph's block sums and numpy's means differ).
+        Graphs with a touch gate (a detector class with a registered
+        :func:`register_gate_margin`, e.g. the FSR detector): a disagreement also
+        passes when the batch detector's gate input (the FSR ``press``) lies within
+        ``gate_eps`` of the gate's threshold, i.e. the gate flipped because the
+        graph's rest differs from the recording's rest mean. Default: the largest
+        such difference over the recordings, as the registered margin reports it.
     session : onnxruntime.InferenceSession, optional
         Reuse a session (else CPU, one thread).
 
@@ -198,9 +180,8 @@ def check_detector_parity(
     ref_all = detector.decision_function(Xv, segments=segments)
     sess = session if session is not None else onnx_session(graph)
     prep = graph.prepare_session() if graph.prepare is not None else None
-    gated = bool((graph.features or {}).get("gate")) and isinstance(
-        detector, FSRTouchSlip
-    )
+    margin = _GATE_MARGINS.for_class(type(detector))
+    gated = bool((graph.features or {}).get("gate")) and margin is not None
     refs, ours, gates = [], [], []
     rest_gap = 0.0
     for a, z in segment_bounds(len(Xv), segments):
@@ -213,8 +194,8 @@ def check_detector_parity(
         ours.append(graph_scores(out))
         refs.append(ref_all[a + inst])
         if gated:
-            assert isinstance(detector, FSRTouchSlip)
-            gm, gap = _fsr_gate_margin(detector, graph, Xv[a:z], inst)
+            assert margin is not None
+            gm, gap = margin(detector, graph, Xv[a:z], inst)
             gates.append(gm)
             rest_gap = max(rest_gap, gap) if math.isfinite(gap) else rest_gap
     if not refs:

@@ -1,10 +1,11 @@
 """Exporters of the analytic detectors whose math ONNX can express: a window in, the score out.
 
 The code lives in one module per piece: :mod:`~slipkit.export.detector_graph` (the graph type
-and shared pieces), :mod:`~slipkit.export.fsr_touch_slip`, :mod:`~slipkit.export.biotac_detectors`,
+and shared pieces), :mod:`~slipkit.export.biotac_detectors`,
 :mod:`~slipkit.export.detector_parity`; this module registers
 their exporters, re-exports their names and runs the parity benchmark
-(``python -m slipkit.export.detectors``).
+(``python -m slipkit.export.detectors``). Family folders export their detectors with the same
+pieces (``slipkit/families/<family>/export/``, e.g. the FSR touch-and-slip graph).
 
 Every graph takes a window of the last ``W`` raw samples, shape ``(batch, W,
 n_channels)`` float32, oldest first (what the runtime's ring buffer holds), and
@@ -19,19 +20,6 @@ the only rounding that differs from the batch detector is the float32 input. The
 graphs instead read the float64 window itself, shape ``(batch, W)`` (one channel), and
 return a float64 score: no cast nodes, no float32 rounding.
 
-* :class:`~slipkit.baselines.fsr.FSRTouchSlip` -- ``W = 2 block`` (10): the two
-  block means, their backward difference over the cycle time, one sign, the touch
-  gate (the plain two-block graph is four nodes: ``Gemm``, ``Add``, ``ReduceMin``,
-  ``Clip``; :func:`_fsr_gated`). Decision instants are block ends: ``hop = block``
-  (5). The batch detector
-  averages each recording's first 10 samples into its rest level; for voltage input
-  the runtime op ``press_sign`` does the same per stream (:func:`fsr_press_sign_step`),
-  with the fitted polarity's sign, or, for ``polarity_ == "per_recording"`` (training
-  wirings of both signs), the sign latched at the stream's first press, and the graph
-  reads ``sign * (v - v_rest)`` with rest 0 and the paper's sign: its rest and gate
-  are the recording's own, so a recording of the other wiring is never touched, as
-  in the batch detector. Force input, or an explicit ``rest=...``: the
-  gate is against a **fixed rest voltage**, a calibration constant in the graph.
 * :class:`~slipkit.baselines.biotac.ForceDerivative` -- ``W = span + 1`` (4):
   ``Ft = sqrt(fx^2 + fy^2)`` (or ``Ft`` itself) at both ends, ``-(Ft[-1] - Ft[0])
   rate / span``; the same numbers as the batch detector.
@@ -81,7 +69,6 @@ from numpy.typing import NDArray
 
 from slipkit.baselines.base import StreamDetector
 from slipkit.baselines.biotac import ForceDerivative, PressureVibration
-from slipkit.baselines.fsr import FSRTouchSlip
 from slipkit.export.biotac_detectors import (  # noqa: F401
     _band_matrix,
     _reduce_min,
@@ -108,24 +95,10 @@ from slipkit.export.detector_graph import (  # noqa: F401
     steady_state_fir,
 )
 from slipkit.export.detector_parity import (  # noqa: F401
-    _fsr_gate_margin,
     _preprocessed_windows,
     check_detector_parity,
     detector_windows,
     graph_scores,
-)
-from slipkit.export.fsr_touch_slip import (  # noqa: F401
-    _GATE_SCALE,
-    _GATE_SHIFT,
-    _NO_BLOCK,
-    _float32_range,
-    _fsr_confirmed,
-    _fsr_deriv_row,
-    _fsr_gated,
-    _fsr_graph_out,
-    export_fsr_touch_slip,
-    fsr_press_sign_step,
-    fsr_runtime_steps,
 )
 from slipkit.export.parity import onnx_session
 from slipkit.export.registry import (
@@ -171,46 +144,6 @@ def main() -> None:
     detector's row: ``python -m slipkit.families.sliptack.export.torsion``).
     """
     rows: list[tuple[str, StreamDetector, DetectorGraph, Any, Any]] = []
-    for input_ in ("voltage", "force"):
-        X, y, seg = _stack(
-            _simulate("fsr_probe_slide", 3, 3), "fsr", ["voltage"], "slip_event"
-        )
-        Xh, _, sh = _stack(
-            _simulate("fsr_probe_slide", 3, 4), "fsr", ["voltage"], "slip_event"
-        )
-        det: StreamDetector = FSRTouchSlip(input=input_).fit(X, y, segments=seg)
-        rows.append(
-            (f"FSRTouchSlip ({input_})", det, export_fsr_touch_slip(det), Xh, sh)
-        )
-    # the confirmed variant (configs/detector/fsr_robust.yaml: 3 peaks within 0.4 s), at
-    # the paper's alpha and at the per-sample ROC's (near the noise: many close peaks)
-    for thr in (8.0, None):
-        det = FSRTouchSlip(confirm_events=3, confirm_window_s=0.4, threshold=thr)
-        det.fit(X, y, segments=seg)
-        rows.append(
-            ("FSRTouchSlip (confirmed)", det, export_fsr_touch_slip(det), Xh, sh)
-        )
-    # mixed wirings (the hard scene): polarity per recording, the press_sign op before the
-    # graph (parity runs it over every call of each held-out recording, as the loop does)
-    import warnings
-
-    from slipkit.baselines.fsr import PolarityWarning
-
-    X, y, seg = _stack(
-        _simulate("fsr_probe_slide_hard", 4, 3), "fsr", ["voltage"], "slip_event"
-    )
-    Xh, _, sh = _stack(
-        _simulate("fsr_probe_slide_hard", 4, 4), "fsr", ["voltage"], "slip_event"
-    )
-    for name, kw in (
-        ("FSR per-recording", {}),
-        ("FSR per-rec. confirmed", {"confirm_events": 3, "confirm_window_s": 0.4}),
-    ):
-        det = FSRTouchSlip(threshold=8.0, **kw)  # type: ignore[arg-type]
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", PolarityWarning)
-            det.fit(X, y, segments=seg)
-        rows.append((name, det, export_fsr_touch_slip(det), Xh, sh))
     fit_ds, held = (
         _simulate("biotac_lift_slip", 3, 5),
         _simulate("biotac_lift_slip", 3, 6),
@@ -276,10 +209,8 @@ def print_parity_rows(
 # __main__ after the package import may already have registered the first one; only
 # the imported module registers (a duplicate registration raises).
 if __name__ != "__main__":
-    register_exporter(FSRTouchSlip, export_fsr_touch_slip)
     register_exporter(ForceDerivative, export_force_derivative)
     register_exporter(PressureVibration, export_pressure_vibration)
-    register_runtime_steps(FSRTouchSlip, fsr_runtime_steps)
     register_runtime_steps(PressureVibration, pressure_runtime_steps)
 
 __all__ = [
@@ -290,9 +221,7 @@ __all__ = [
     "check_detector_parity",
     "detector_windows",
     "export_force_derivative",
-    "export_fsr_touch_slip",
     "export_pressure_vibration",
-    "fsr_press_sign_step",
     "graph_scores",
     "pressure_baseline",
     "print_parity_rows",

@@ -10,7 +10,7 @@ scene and scenario resolves, each config and doc page exists.
 
 The records hold strings only, resolved on demand (:func:`resolve`), so this module imports
 nothing of the stages and any stage may read it. A family packaged as one folder lives in
-``slipkit/families/<name>/`` (``gelsight``, ``sliptack``); :data:`PLUGIN_MODULES` names the
+``slipkit/families/<name>/`` (``gelsight``, ``sliptack``, ``fsr``); :data:`PLUGIN_MODULES` names the
 modules of such folders that register plug-ins when imported, by kind, and the stage owning a
 kind imports them by name (:func:`load_plugins`), never statically.
 """
@@ -48,6 +48,9 @@ class Family:
         ``configs/closedloop/<name>.yaml`` and the registered closed-loop scenario.
     docs : tuple of str
         The doc pages (paths under ``docs/``).
+    detectors : tuple of str
+        Modules of a family folder whose estimators train as detectors (the ``detector:``
+        slot of a train config, as ``slipkit.baselines``'s): :func:`detector_module`.
     """
 
     name: str
@@ -60,6 +63,7 @@ class Family:
     comparisons: tuple[str, ...] = ()
     scenario: str | None = None
     docs: tuple[str, ...] = field(default_factory=tuple)
+    detectors: tuple[str, ...] = ()
 
 
 _T = "slipkit.train.tasks."
@@ -69,6 +73,8 @@ _ST = "slipkit.families.sliptack."
 _SLIPTACK_EXPORTERS = tuple(
     f"{_ST}export.{m}" for m in ("speed", "detector", "onset", "spectral", "torsion")
 )
+_FSR = "slipkit.families.fsr."
+_FSR_EXPORTERS = (_FSR + "export.touch_slip", _FSR + "export.onset")
 
 FAMILIES: dict[str, Family] = {
     f.name: f
@@ -125,15 +131,12 @@ FAMILIES: dict[str, Family] = {
             tasks=(_DETECT,),
             deploys=(_DETECT,),
             compares=(_DETECT,),
-            exporters=(
-                "slipkit.export.fsr_touch_slip",
-                "slipkit.export.fsr_onset",
-                "slipkit.export.generic",
-            ),
+            exporters=(*_FSR_EXPORTERS, "slipkit.export.generic"),
             scenes=("fsr_probe_slide", "fsr_probe_slide_hard"),
             comparisons=("fsr",),
             scenario="fsr",
             docs=("simulation/fsr.md", "baselines/fsr.md"),
+            detectors=(_FSR + "touch_slip", _FSR + "onset"),
         ),
         Family(
             name="sliptack",
@@ -146,6 +149,7 @@ FAMILIES: dict[str, Family] = {
             comparisons=("sliptack", "sliptack_slip"),
             scenario="sliptack",
             docs=("simulation/sliptack.md", "baselines/sliptack.md"),
+            detectors=tuple(_ST + m for m in ("speed", "accel", "onset", "torsion")),
         ),
         Family(
             name="davis",
@@ -189,11 +193,15 @@ FAMILIES: dict[str, Family] = {
 #:
 #: Scenes, tasks and estimators are built from ``configs/`` by their ``_target_`` paths.
 PLUGIN_MODULES: dict[str, tuple[str, ...]] = {
-    "exporters": ("slipkit.families.gelsight.export", *_SLIPTACK_EXPORTERS),
+    "exporters": (
+        "slipkit.families.gelsight.export",
+        *_SLIPTACK_EXPORTERS,
+        *_FSR_EXPORTERS,
+    ),
     "deployers": (_ST + "deploy",),
     "adapters": (_ST + "adapter",),
-    "scenarios": (_ST + "scenario",),
-    "effects": (_ST + "effects",),
+    "scenarios": (_ST + "scenario", _FSR + "scenario"),
+    "effects": (_ST + "effects", _FSR + "effects"),
     "tasks": (_ST + "task",),
 }
 
@@ -205,10 +213,26 @@ def resolve(ref: str) -> Any:
     return getattr(mod, attr) if attr else mod
 
 
+def detector_module(module: str) -> bool:
+    """Whether the estimators of ``module`` train as detectors (the ``detector:`` slot of a
+    train config, analytic unless the class says otherwise): ``slipkit.baselines`` and the
+    modules families list as ``detectors``."""
+    return module.startswith("slipkit.baselines.") or any(
+        module in f.detectors for f in FAMILIES.values()
+    )
+
+
 def load_plugins(kind: str) -> None:
     """Import every family folder's modules of ``kind`` (registering what they hold)."""
     for module in PLUGIN_MODULES.get(kind, ()):
         importlib.import_module(module)
 
 
-__all__ = ["FAMILIES", "PLUGIN_MODULES", "Family", "load_plugins", "resolve"]
+__all__ = [
+    "FAMILIES",
+    "PLUGIN_MODULES",
+    "Family",
+    "detector_module",
+    "load_plugins",
+    "resolve",
+]

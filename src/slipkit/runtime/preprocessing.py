@@ -59,7 +59,7 @@ op                           parameters, effect
                              mean further than ``delta`` from rest (+1 when below
                              it); zeros until both are known. The FSR detector's
                              per-stream rest level
-                             (:class:`slipkit.baselines.fsr.FSRTouchSlip`, voltage
+                             (:class:`slipkit.families.fsr.touch_slip.FSRTouchSlip`, voltage
                              input; ``sign`` 0 for ``polarity="per_recording"``)
 ===========================  =====================================================
 """
@@ -639,7 +639,7 @@ def _davis_areas(f: Fields, in_shape: tuple[int, ...]) -> Op:
 
 # -- FSR press polarity: the rest level (and the wiring's sign) learned from the stream ------
 # FSRTouchSlip takes each recording's rest level from its first samples and, with
-# polarity="per_recording", its sign from its first press (slipkit.baselines.fsr). A
+# polarity="per_recording", its sign from its first press (slipkit.families.fsr.touch_slip). A
 # graph holds constants only, so the rest level and the sign are latched here, in numpy
 # (a fixed polarity gives the sign), and the graph reads the sign-normalised signal
 # (rest 0, a press falling, slip rising: the paper's wiring).
@@ -648,7 +648,7 @@ def _davis_areas(f: Fields, in_shape: tuple[int, ...]) -> Op:
 def _left_mean(values: Array) -> float:
     """Mean of the finite ``values`` summed left to right (NaN if none).
 
-    The detector's own rounding (``slipkit.baselines.fsr._sequential_sum``): numpy's
+    The detector's own rounding (``slipkit.families.fsr.touch_slip._sequential_sum``): numpy's
     pairwise sum could differ in the last bit, and the touch gate compares with it.
     """
     total, n = 0.0, 0

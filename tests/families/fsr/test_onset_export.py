@@ -8,8 +8,6 @@ import numpy as np
 import pytest
 from tests.baselines.test_conventions import fsr_trials, stack
 
-from slipkit.baselines.fsr import PolarityWarning
-from slipkit.baselines.fsr_onset import FSROnset, FSROnsetLogistic
 from slipkit.export import export
 from slipkit.export.detectors import (
     DetectorGraph,
@@ -18,6 +16,8 @@ from slipkit.export.detectors import (
     graph_scores,
 )
 from slipkit.export.parity import onnx_session
+from slipkit.families.fsr.onset import FSROnset, FSROnsetLogistic
+from slipkit.families.fsr.touch_slip import PolarityWarning
 from slipkit.runtime.preprocessing import Pipeline
 
 

@@ -11,9 +11,9 @@ from tests.baselines.test_conventions import fsr_trials
 from tests.baselines.test_conventions import stack as generator_stack
 
 from slipkit import config_dir
-from slipkit.baselines.fsr import PolarityWarning
-from slipkit.baselines.fsr_onset import FSROnset, FSROnsetLogistic, onset_matrix
 from slipkit.errors import SlipkitError
+from slipkit.families.fsr.onset import FSROnset, FSROnsetLogistic, onset_matrix
+from slipkit.families.fsr.touch_slip import PolarityWarning
 from slipkit.sim.commands import build_scene
 
 RATE = 2000.0

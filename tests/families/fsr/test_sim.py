@@ -12,16 +12,16 @@ from hypothesis import strategies as st
 from slipkit import config_dir
 from slipkit.cli import main as cli_main
 from slipkit.data import Trial, load_dataset
-from slipkit.physics.fsr import (
+from slipkit.families.fsr.physics import (
     TABLE3_CORNERS,
     expected_slip_events,
     force_from_voltage,
     rest_voltage,
     voltage_from_force,
 )
+from slipkit.families.fsr.scene import FSRProbeSlide
 from slipkit.sim import Scene, SimulationError
 from slipkit.sim.commands import build_scene
-from slipkit.sim.scenes.fsr import FSRProbeSlide
 
 BLOCK = 5  # the paper's stage 2: means of 5 samples
 RATE = 2000.0

@@ -1,17 +1,17 @@
-"""ONNX graphs of the FSR onset detectors (:mod:`slipkit.baselines.fsr_onset`).
+"""ONNX graphs of the FSR onset detectors (:mod:`slipkit.families.fsr.onset`).
 
 Both read the float64 window of the last ``W = lead + edge + 1 + rebound`` samples of the
 signed signal ``sign (v - v_rest)`` that the runtime op ``press_sign`` makes on the
-gripper PC (one-sample blocks: :func:`~slipkit.baselines.fsr_onset.slip_sign_step`),
+gripper PC (one-sample blocks: :func:`~slipkit.families.fsr.onset.slip_sign_step`),
 shape ``(batch, W)``, and return a float64 ``score`` ``(batch,)``; the runtime calls
 them on every sample (``hop = 1``).
 
-* :class:`~slipkit.baselines.fsr_onset.FSROnset`: one ``MatMul`` gives every
-  difference the rules read (:func:`~slipkit.baselines.fsr_onset.onset_matrix`: each
+* :class:`~slipkit.families.fsr.onset.FSROnset`: one ``MatMul`` gives every
+  difference the rules read (:func:`~slipkit.families.fsr.onset.onset_matrix`: each
   column two entries +-1, so the exact difference, as numpy's), then ``column -
   (coef E + const)`` (``Mul``, ``Add``, ``Sub``), ``ReduceMin >= 0`` and ``Where`` of
   the release ``E``: ten nodes, the batch detector's own float64 operations.
-* :class:`~slipkit.baselines.fsr_onset.FSROnsetLogistic`: the shape numerators as
+* :class:`~slipkit.families.fsr.onset.FSROnsetLogistic`: the shape numerators as
   the maxima of four groups of exact differences (one ``MatMul``, ``Reshape``,
   ``ReduceMax``), the five features (``Div``, ``Clip``, ``Log``, ``Min``,
   ``Concat``), the logit (``MatMul``, ``Add``) and the candidate gate (``Gemm``,
@@ -32,12 +32,6 @@ import onnx
 from onnx import helper
 from sklearn.utils.validation import check_is_fitted
 
-from slipkit.baselines.fsr_onset import (
-    FEATURE_CLIP,
-    FSROnset,
-    FSROnsetLogistic,
-    slip_sign_step,
-)
 from slipkit.export._graph import DOUBLE, GraphBuilder
 from slipkit.export.detectors import (
     NO_SCORE,
@@ -45,7 +39,6 @@ from slipkit.export.detectors import (
     WINDOW_INPUT,
     DetectorGraph,
     _axes,
-    _float32_range,
     _graph,
 )
 from slipkit.export.registry import (
@@ -54,6 +47,13 @@ from slipkit.export.registry import (
     StreamContext,
     register_exporter,
     register_runtime_steps,
+)
+from slipkit.families.fsr.export.touch_slip import _float32_range
+from slipkit.families.fsr.onset import (
+    FEATURE_CLIP,
+    FSROnset,
+    FSROnsetLogistic,
+    slip_sign_step,
 )
 
 

@@ -21,13 +21,13 @@ from omegaconf import DictConfig
 from tests.baselines.test_conventions import ROBUST, fsr_trials, stack
 
 from slipkit import config_dir
-from slipkit.baselines.fsr import FSRTouchSlip, PolarityWarning
-from slipkit.export.detectors import (
-    check_detector_parity,
+from slipkit.export.detectors import check_detector_parity
+from slipkit.export.registry import ExportError
+from slipkit.families.fsr.export.touch_slip import (
     export_fsr_touch_slip,
     fsr_press_sign_step,
 )
-from slipkit.export.registry import ExportError
+from slipkit.families.fsr.touch_slip import FSRTouchSlip, PolarityWarning
 from slipkit.runtime.errors import BundleError
 from slipkit.runtime.preprocessing import Pipeline
 from slipkit.runtime.sources import ReplaySource
@@ -202,7 +202,7 @@ def hard_fsr(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     return run_dir, out
 
 
-@pytest.mark.filterwarnings("ignore::slipkit.baselines.fsr.PolarityWarning")
+@pytest.mark.filterwarnings("ignore::slipkit.families.fsr.touch_slip.PolarityWarning")
 def test_fsr_robust_bundle_on_the_hard_scene_decides_as_the_detector_per_stream(
     hard_fsr: tuple[Path, Path],
 ) -> None:
@@ -238,7 +238,7 @@ def test_fsr_robust_bundle_on_the_hard_scene_decides_as_the_detector_per_stream(
     assert n_slip > 0
 
 
-@pytest.mark.filterwarnings("ignore::slipkit.baselines.fsr.PolarityWarning")
+@pytest.mark.filterwarnings("ignore::slipkit.families.fsr.touch_slip.PolarityWarning")
 def test_fsr_hard_scene_export_checks_the_loop_over_a_stream_and_replays_each_wiring(
     hard_fsr: tuple[Path, Path],
 ) -> None:

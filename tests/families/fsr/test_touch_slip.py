@@ -11,9 +11,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from slipkit import config_dir
-from slipkit.baselines.fsr import FSRTouchSlip
 from slipkit.data import Dataset
-from slipkit.physics.fsr import force_from_voltage
+from slipkit.families.fsr.physics import force_from_voltage
+from slipkit.families.fsr.touch_slip import FSRTouchSlip
 from slipkit.sim.commands import build_scene
 
 REST_V, PRESSED_V = 4.5, 2.5

@@ -6,7 +6,7 @@ Each acts on the physical normal force ``signals["force"]`` (N, aligned with the
 through the inverse of the calibration eq. 6 (the difference ``V(F_new) - V(F_old)`` is
 added, so voltage-domain effects listed earlier are kept). List them before the
 voltage-domain effects (noise, quantisation). Source: Gentile et al. 2020; the scene is
-:class:`slipkit.sim.scenes.fsr.FSRProbeSlide`; documentation: ``docs/simulation/fsr.md``.
+:class:`slipkit.families.fsr.scene.FSRProbeSlide`; documentation: ``docs/simulation/fsr.md``.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from slipkit.physics.fsr import (
+from slipkit.families.fsr.physics import (
     SLIP_COUNT_COEFF,
     SLIP_COUNT_FORCE_EXPONENT,
     SLIP_COUNT_PASS_EXPONENT,
@@ -123,7 +123,7 @@ def fsr_slip_events(
 
     Count per pass ``n ~ Poisson(c F^alpha T^beta)``, the law fitted to Table 3 of the
     paper (more events at higher normal force ``F``, fewer per pass for a shorter pass
-    ``T``, a higher rate per second; :func:`slipkit.physics.fsr.expected_slip_events`).
+    ``T``, a higher rate per second; :func:`slipkit.families.fsr.physics.expected_slip_events`).
     Event times: evenly spaced over the pass, each moved by up to ``jitter`` of the
     spacing (stick-slip is quasi-periodic). Each event releases the normal force abruptly
     and rings: ``dF(t) = -A exp(-t / decay_s) cos(2 pi ring_hz t)``, ``A`` a fraction

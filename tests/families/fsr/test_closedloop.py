@@ -108,7 +108,7 @@ def test_sensor_voltage_rises_when_the_grip_falls() -> None:
         scene_cfg = compose("train", [f"scene={scen.scene}"]).scene
     OmegaConf.set_struct(scene_cfg, False)
     scene_cfg.effects = {}  # no noise, knocks or slip events: the calibration alone
-    from slipkit.closedloop.fsr import FSRSensor
+    from slipkit.families.fsr.scenario import FSRSensor
 
     sensor = FSRSensor(
         build_scene(scene_cfg),

@@ -57,11 +57,11 @@ from slipkit.closedloop.plant import (
     check_params,
 )
 from slipkit.closedloop.run import Outcome, speed_grid
-from slipkit.closedloop.scenarios import plant_params, register_scenario
+from slipkit.closedloop.scenarios import _draw, _span, plant_params, register_scenario
 from slipkit.errors import SlipkitError
-from slipkit.physics.fsr import expected_slip_events, voltage_from_force
+from slipkit.families.fsr.physics import expected_slip_events, voltage_from_force
+from slipkit.families.fsr.scene import FSRProbeSlide
 from slipkit.sim.core import EFFECTS, Scene, SceneState, draw_effect_params, effect_name
-from slipkit.sim.scenes.fsr import FSRProbeSlide
 
 #: Force-domain effects of the plant's trial timeline (no dependence on the plant).
 TIMELINE_EFFECTS = frozenset({"fsr_disturbance", "fsr_impulse_disturbance"})
@@ -72,16 +72,6 @@ PLANT_EFFECTS = frozenset({"fsr_touch"})
 #: Voltage-domain effects, applied per frame on a one-sample state.
 FRAME_EFFECTS = frozenset({"fsr_polarity", "white_noise", "quantisation"})
 KNOWN = TIMELINE_EFFECTS | RECURSIVE_EFFECTS | PLANT_EFFECTS | FRAME_EFFECTS
-
-
-def _span(value: Any) -> tuple[float, float]:
-    items = list(value) if isinstance(value, list | tuple) else [value, value]
-    return float(items[0]), float(items[-1])
-
-
-def _draw(rng: np.random.Generator, value: Any) -> float:
-    lo, hi = _span(value)
-    return lo if lo == hi else float(rng.uniform(lo, hi))
 
 
 @dataclass

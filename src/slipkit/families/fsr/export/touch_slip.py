@@ -2,6 +2,23 @@
 variants) and the runtime op ``press_sign`` it needs for voltage input.
 
 The graph contract: :mod:`slipkit.export.detectors`.
+
+The graph of :class:`~slipkit.families.fsr.touch_slip.FSRTouchSlip`: ``W = 2 block`` (10): the two
+block means, their backward difference over the cycle time, one sign, the touch
+gate (the plain two-block graph is four nodes: ``Gemm``, ``Add``, ``ReduceMin``,
+``Clip``; :func:`_fsr_gated`). Decision instants are block ends: ``hop = block``
+(5). The batch detector
+averages each recording's first 10 samples into its rest level; for voltage input
+the runtime op ``press_sign`` does the same per stream (:func:`fsr_press_sign_step`),
+with the fitted polarity's sign, or, for ``polarity_ == "per_recording"`` (training
+wirings of both signs), the sign latched at the stream's first press, and the graph
+reads ``sign * (v - v_rest)`` with rest 0 and the paper's sign: its rest and gate
+are the recording's own, so a recording of the other wiring is never touched, as
+in the batch detector. Force input, or an explicit ``rest=...``: the
+gate is against a **fixed rest voltage**, a calibration constant in the graph.
+
+Importing this module registers the exporter, the runtime steps and the parity check's gate
+margin (:func:`fsr_gate_margin`) for :class:`FSRTouchSlip`.
 """
 
 from __future__ import annotations
@@ -12,11 +29,11 @@ from typing import Any
 
 import numpy as np
 import onnx
+from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 from onnx import helper
 from sklearn.utils.validation import check_is_fitted
 
-from slipkit.baselines.fsr import FSRTouchSlip
 from slipkit.export._graph import DOUBLE, GraphBuilder
 from slipkit.export.detector_graph import (
     _F32_MAX,
@@ -28,13 +45,17 @@ from slipkit.export.detector_graph import (
     _graph,
     _not_finite,
 )
+from slipkit.export.detector_parity import register_gate_margin
 from slipkit.export.registry import (
     DEFAULT_OPSET,
     ExportError,
     RuntimeSteps,
     StreamContext,
+    register_exporter,
+    register_runtime_steps,
 )
-from slipkit.physics.fsr import rest_voltage
+from slipkit.families.fsr.physics import rest_voltage
+from slipkit.families.fsr.touch_slip import FSRTouchSlip
 
 
 # -- FSR --------------------------------------------------------------------------------
@@ -63,7 +84,7 @@ def export_fsr_touch_slip(
         touched all along). Force input, or ``gate=False``, with None: the detector's
         ``rest_V_`` (the median rest voltage of its training recordings), or, if that
         is not finite, the calibration polynomial's zero-force voltage
-        (:func:`slipkit.physics.fsr.rest_voltage`, 4.5 V by default; the paper's
+        (:func:`slipkit.families.fsr.physics.rest_voltage`, 4.5 V by default; the paper's
         falling wiring only). With ``input="force"`` the graph's rest force is
         ``F(rest)``. The slip sign and the gate follow the detector's fitted
         ``polarity_``.
@@ -509,3 +530,52 @@ def fsr_runtime_steps(det: FSRTouchSlip, ctx: StreamContext) -> RuntimeSteps:
             "PC; start the loop (or reset it) at rest before each grasp"
         ],
     )
+
+
+def fsr_gate_margin(
+    detector: FSRTouchSlip,
+    graph: DetectorGraph,
+    x: NDArray[np.float64],
+    inst: NDArray[np.int64],
+) -> tuple[NDArray[np.float64], float]:
+    """|press - delta| of the batch detector at ``inst`` and |graph rest - recording rest|
+    (the parity check's gate margin, :func:`slipkit.export.detector_parity.register_gate_margin`).
+
+    With the rest from the stream (``press_sign``) no rest differs, and the gap is one
+    float32 step of the largest ``|v - rest|`` (far above the few float64 steps by which
+    the graph's block sums and numpy's means differ).
+    """
+    spec = graph.features or {}
+    b = int(spec["block"])
+    if any(st.get("op") == "press_sign" for st in graph.preprocessing):
+        # the press_sign op gives the graph this recording's own rest (and, per
+        # recording, its sign): the batch detector's press per block, at the instants
+        # (block ends)
+        _, press_b = detector._block_stats(x[:, 0])
+        blk = (inst - (b - 1)) // b
+        press_i = np.full(len(inst), np.nan)
+        ok = blk < len(press_b)
+        press_i[ok] = press_b[blk[ok]]
+        # the graph reads sign * (v - rest) in float64 and sums a block in its own
+        # order: its press can differ from numpy's mean by a few float64 steps of the
+        # largest |v - rest|; allow one float32 step, far above that (no rest gap: the
+        # rest is the same)
+        head = x[: int(detector.rest_samples), 0]
+        finite = head[np.isfinite(head)]
+        dev = np.abs(x[:, 0] - np.mean(finite)) if finite.size else np.zeros(1)
+        top = float(np.max(dev[np.isfinite(dev)], initial=0.0))
+        return np.abs(press_i - float(spec["delta"])), float(
+            np.spacing(np.float32(min(top, _F32_MAX)))
+        )
+    sig = detector._signal(x[:, 0])
+    head = sig[: int(detector.rest_samples)]
+    finite = head[np.isfinite(head)]
+    rest = float(np.mean(finite)) if finite.size else np.nan
+    means = sliding_window_view(sig, b).mean(axis=1)[inst - (b - 1)]
+    press = detector._sign * (rest - means)
+    return np.abs(press - float(spec["delta"])), abs(float(spec["rest_signal"]) - rest)
+
+
+register_exporter(FSRTouchSlip, export_fsr_touch_slip)
+register_runtime_steps(FSRTouchSlip, fsr_runtime_steps)
+register_gate_margin(FSRTouchSlip, fsr_gate_margin)
