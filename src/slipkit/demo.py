@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
 import math
 import sys
 import time
@@ -210,16 +211,53 @@ def _closedloop_detector(
     verdict: str,
     recommended: bool,
     shown: dict[str, Any],
+    debounce_k: int | None = None,
 ) -> tuple[str | None, list[str], str]:
     """:func:`closedloop_pick` on the scenario's detectors, and the overrides that leave
     the others out (the demo runs the verdict's detector beside the oracle and
-    no-detector bounds; ``slipkit closedloop scenario=<name>`` runs them all)."""
+    no-detector bounds; ``slipkit closedloop scenario=<name>`` runs them all).
+
+    ``debounce_k``: the deployed bundle's debounce (the comparison chose it on
+    validation). The closed loop runs that operating point: the scenario's detector of
+    the same run and export options with that debounce, else one added as
+    ``<run>_k<debounce_k>``, so the row's grasp is the bundle's own.
+    """
     node = compose(config_name="closedloop", overrides=overrides).closedloop
-    names = [str(d) for d in (node.get("detectors") or {})]
+    dets = node.get("detectors") or {}
+    names = [str(d) for d in dets]
     pick, why = closedloop_pick(name, verdict, recommended, names, shown)
     if pick is None:
         return None, [], why
-    return pick, [f"~closedloop.detectors.{d}" for d in names if d != pick], ""
+    extra: list[str] = []
+    if debounce_k is not None and int(dets[pick].get("debounce_k", 1)) != debounce_k:
+        run = str(dets[pick].run)
+        export = list(dets[pick].get("export") or [])
+        same = [
+            d
+            for d in names
+            if str(dets[d].run) == run
+            and list(dets[d].get("export") or []) == export
+            and int(dets[d].get("debounce_k", 1)) == debounce_k
+        ]
+        if same:
+            pick = same[0]
+        elif not export:
+            pick = f"{run}_k{debounce_k}"
+            extra = [
+                f"+closedloop.detectors.{pick}={{run:{run},debounce_k:{debounce_k}}}"
+            ]
+        else:
+            extra = [f"closedloop.detectors.{pick}.debounce_k={debounce_k}"]
+    drop = [f"~closedloop.detectors.{d}" for d in names if d != pick]
+    return pick, [*drop, *extra], ""
+
+
+def _bundle_debounce(bundle: Path | None) -> int | None:
+    """The debounce ``k`` an exported bundle deploys (None: no bundle)."""
+    if bundle is None:
+        return None
+    manifest = json.loads((Path(bundle) / "manifest.json").read_text())
+    return int((manifest.get("debounce") or {}).get("k", 1))
 
 
 def _run_closedloop(
@@ -439,6 +477,7 @@ def demo_main(cfg: DictConfig) -> Path:
             verdict_est,
             bool(best.get(family, {}).get("recommended", False)),
             dict(shown.get(name) or {}),
+            _bundle_debounce(exported.get(family)),
         )
         if pick is None:
             closed[family] = {"scenario": name, "why": why}
