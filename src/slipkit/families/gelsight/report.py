@@ -49,7 +49,7 @@ Factory = Callable[[], Any]
 #: first armed frame, so the marker jump that opens slip clips (frames 3-10) is read
 CONTACT_ARMS = (3, 4)
 #: frames after arming that ``contact_motion`` watches (None: the whole recording)
-CONTACT_HORIZONS = (50, 100, None)
+CONTACT_HORIZONS = (50, 100, 150, 200, 250, None)
 
 
 @dataclass(frozen=True)
