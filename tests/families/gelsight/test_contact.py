@@ -101,3 +101,16 @@ def test_fingertips_must_agree_when_asked() -> None:
 def test_bad_settings_are_refused_in_one_line(kw: dict) -> None:
     with pytest.raises(SlipkitError, match=next(iter(kw))):
         PinMotionDetector(**kw)
+
+
+def test_contact_candidates_stay_armed_at_contact_whatever_the_report_arm() -> None:
+    from slipkit.families.gelsight.report import CONTACT_ARMS, candidates
+
+    cands = {c.name: c for c in candidates(0, arm=50)}
+    for name in ("divergence_contact", "contact_motion"):
+        arms = {factory().arm for _, factory in cands[name].settings}
+        assert arms <= set(CONTACT_ARMS)
+    assert {f().arm for _, f in cands["pin_motion"].settings} == {50}
+    horizons = {f().horizon for _, f in cands["contact_motion"].settings}
+    assert None in horizons
+    assert len(horizons) > 1
