@@ -4,12 +4,17 @@ A trial is a mapping ``fingertip -> (n_frames, 2K)`` pin positions (px, the impo
 streams). Every detector gives a score per frame from the frames up to it (a window of
 at most ``window`` frames, armed ``arm`` frames after the recording starts), the largest
 over the fingertips; it *fires* at the first frame whose score reaches ``threshold_``
-and a trial counts as slip when it ever fires. ``threshold_`` is chosen by
+and a trial counts as slip when it ever fires. ``horizon`` (frames after arming; None:
+the whole recording) limits what a detector watches to the contact phase: it knows the
+time since the recording started, never the clip's length. ``fingers="min"`` asks every
+fingertip to agree (an object sliding out moves both gels; a wiggle can twist one).
+``threshold_`` is chosen by
 :func:`choose_threshold` on out-of-fold trial scores of the training side
 (:mod:`slipkit.families.gelsight.report`), never on the trials scored.
 
 * :class:`PinMotionDetector` -- analytic: one pin-field quantity over the window
-  (``divergence``: |divergence|; ``steady``: translation x straightness, the net drift
+  (``divergence``: |divergence|; ``contraction``: minus the divergence, the field
+  drawing together; ``steady``: translation x straightness, the net drift
   of the field; ``residual``: the non-affine part; ``divergence_per_path``: |divergence|
   over the field's path length in the window, floored at :data:`MIN_PATH` pitches: the
   gel spreading or contracting for its motion, which a shake that moves the field far
@@ -91,12 +96,25 @@ class _Detector:
 
     streaming = True
 
-    def __init__(self, *, window: int = 50, arm: int = 12) -> None:
+    def __init__(
+        self,
+        *,
+        window: int = 50,
+        arm: int = 12,
+        horizon: int | None = None,
+        fingers: str = "max",
+    ) -> None:
         if not 2 <= int(window) <= 50:
             raise SlipkitError(
                 f"window={window}: at most 50 frames (2 s at 25 fps), at least 2"
             )
+        if horizon is not None and int(horizon) < 1:
+            raise SlipkitError(f"horizon={horizon}: at least 1 frame, or None")
+        if fingers not in ("max", "min"):
+            raise SlipkitError(f"fingers={fingers!r}: expected 'max' or 'min'")
         self.window, self.arm = int(window), int(arm)
+        self.horizon = None if horizon is None else int(horizon)
+        self.fingers = fingers
         self.threshold_ = float("nan")
 
     #: window features by (array id, window, arm), holding the array so the id stays
@@ -121,13 +139,21 @@ class _Detector:
         raise NotImplementedError
 
     def frame_scores(self, trial: Trial) -> FloatArray:
-        """Score per frame, the largest over the fingertips (NaN while warming up)."""
+        """Score per frame over the fingertips (NaN while warming up and after the
+        horizon): the largest (``fingers="max"``), or the smallest (``"min"``: every
+        fingertip must agree, as when the object slides past both gels)."""
         per = [self.finger_scores(f) for f in trial.values()]
         n = min(len(p) for p in per)
         stacked = np.stack([p[:n] for p in per])
         out = np.full(n, np.nan)
-        ok = np.isfinite(stacked).any(axis=0)
-        out[ok] = np.nanmax(stacked[:, ok], axis=0)
+        if self.fingers == "min":
+            ok = np.isfinite(stacked).all(axis=0)
+            out[ok] = np.min(stacked[:, ok], axis=0)
+        else:
+            ok = np.isfinite(stacked).any(axis=0)
+            out[ok] = np.nanmax(stacked[:, ok], axis=0)
+        if self.horizon is not None:
+            out[self.arm + self.horizon :] = np.nan
         return out
 
     def trial_score(self, trial: Trial) -> float:
@@ -141,12 +167,24 @@ class _Detector:
 class PinMotionDetector(_Detector):
     """Analytic: ``quantity`` of the pin field over the window (see the module doc)."""
 
-    QUANTITIES = ("divergence", "steady", "residual", "divergence_per_path")
+    QUANTITIES = (
+        "divergence",
+        "contraction",
+        "steady",
+        "residual",
+        "divergence_per_path",
+    )
 
     def __init__(
-        self, *, quantity: str = "divergence", window: int = 50, arm: int = 12
+        self,
+        *,
+        quantity: str = "divergence",
+        window: int = 50,
+        arm: int = 12,
+        horizon: int | None = None,
+        fingers: str = "max",
     ):
-        super().__init__(window=window, arm=arm)
+        super().__init__(window=window, arm=arm, horizon=horizon, fingers=fingers)
         if quantity not in self.QUANTITIES:
             raise SlipkitError(
                 f"quantity={quantity!r}: expected one of {self.QUANTITIES}"
@@ -158,6 +196,8 @@ class PinMotionDetector(_Detector):
         col = {n: f[:, i] for i, n in enumerate(FEATURES)}
         if self.quantity == "divergence":
             return np.abs(col["divergence"])
+        if self.quantity == "contraction":
+            return -col["divergence"]
         if self.quantity == "steady":
             return col["translation"] * col["straightness"]
         if self.quantity == "divergence_per_path":

@@ -11,6 +11,10 @@ its threshold taken from the out-of-fold scores, and the held-out objects' trial
 scored once. Per seed the held-out trials of all folds are pooled: balanced accuracy
 (trial = slip when the detector ever fires), slip recall, wiggle false-alarm rate and
 the frame of first alarm; the table gives mean and sd over seeds.
+
+``--arm`` sets when the whole-recording detectors are armed; the contact-phase ones
+(``divergence_contact``, ``contact_motion``) are armed at :data:`CONTACT_ARMS`, so their
+displacement reference is the start of contact.
 """
 
 from __future__ import annotations
@@ -41,6 +45,12 @@ from slipkit.families.gelsight.detectors import (
 
 Factory = Callable[[], Any]
 
+#: arming frames of the contact-phase detectors: the displacement reference is the
+#: first armed frame, so the marker jump that opens slip clips (frames 3-10) is read
+CONTACT_ARMS = (3, 4)
+#: frames after arming that ``contact_motion`` watches (None: the whole recording)
+CONTACT_HORIZONS = (50, 100, 150, 200, 250, None)
+
 
 @dataclass(frozen=True)
 class Candidate:
@@ -61,6 +71,36 @@ def candidates(seed: int, arm: int = 12) -> list[Candidate]:
                 (f"{q} w{w}", partial(PinMotionDetector, quantity=q, window=w, arm=arm))
                 for q in PinMotionDetector.QUANTITIES
                 for w in (25, 50)
+            ),
+        ),
+        Candidate(
+            "divergence_contact",
+            tuple(
+                (
+                    f"arm{a} w{w}",
+                    partial(PinMotionDetector, quantity="divergence", window=w, arm=a),
+                )
+                for a in CONTACT_ARMS
+                for w in (25, 50)
+            ),
+        ),
+        Candidate(
+            "contact_motion",
+            tuple(
+                (
+                    f"{q} h{h} {f}",
+                    partial(
+                        PinMotionDetector,
+                        quantity=q,
+                        window=50,
+                        arm=CONTACT_ARMS[0],
+                        horizon=h,
+                        fingers=f,
+                    ),
+                )
+                for q in ("divergence", "contraction", "divergence_per_path")
+                for h in CONTACT_HORIZONS
+                for f in ("max", "min")
             ),
         ),
         Candidate(
