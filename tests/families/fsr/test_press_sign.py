@@ -157,9 +157,25 @@ def test_press_sign_and_graph_equal_the_detector_on_any_walk(
     if len(graph.instants(len(v))) == 0:
         return  # shorter than the first decision: nothing to compare
     rep = check_detector_parity(det, graph, v, session=sess)
-    # passed: decisions agree, any difference lies at a float32 tie with the threshold
-    # or the gate (a linear ramp's equal derivatives can gain or lose a peak in float32)
-    assert True is rep["passed"]
+    # every difference lies at a float32 tie with the threshold or the gate (a linear
+    # ramp's equal derivatives can gain or lose a peak in float32; a last sample back
+    # at the rest level flips the gate); "passed" also needs 99.9 % agreement, which a
+    # walk of a few decisions cannot show with one tie
+    assert True is rep["disagreements_near_threshold"]
+    if rep["n_frames"] >= 1000:
+        assert True is rep["passed"]
+
+
+def test_a_release_at_the_last_sample_differs_only_at_the_gate() -> None:
+    """A press held, then one sample back above the rest at the very end: the graph's
+    gate and the batch detector's may differ there, and only there."""
+    steps = np.zeros(25)
+    steps[0], steps[-1] = 0.002, 0.015
+    v = np.r_[np.full(10, 2.5), 2.5 - 0.3 + np.cumsum(steps) * 20.0][:, None]
+    det, graph, sess = _walk_detector(1)
+    rep = check_detector_parity(det, graph, v, session=sess)
+    assert rep["n_disagree"] <= 1
+    assert True is rep["disagreements_near_threshold"]
 
 
 def test_per_recording_export_refuses_a_fixed_rest() -> None:
