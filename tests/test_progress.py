@@ -12,7 +12,9 @@ from slipkit.compare.commands import compare_main
 from slipkit.progress import progress_line, quiet_progress
 
 
-def test_progress_lines_print_unless_quieted(capsys: pytest.CaptureFixture[str]) -> None:
+def test_progress_lines_print_unless_quieted(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
     progress_line("fold 1/3 done")
     with quiet_progress():
         progress_line("fold 2/3 done")

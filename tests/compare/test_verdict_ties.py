@@ -161,3 +161,40 @@ def test_the_report_states_the_cost_limits_and_where_points_were_chosen() -> Non
     ) in text
     assert "early alarms in more than 25 % of the test trials" in text
     assert "`validation: group k-fold by object, k=2` (the training side only)" in text
+
+
+def test_p99s_within_the_borderline_band_do_not_break_a_tie() -> None:
+    """Equal on every event metric, p99 20 against 23 us: one timing; the comparison's
+    order decides, whichever row timed faster in this run."""
+    for p99_a, p99_b in ((20.0, 23.0), (23.0, 20.0)):
+        df = build_table(
+            [
+                _row("fsr_onset", 0.38, 0.26, 34.7, p99=p99_a),
+                _row("fsr_onset_logistic", 0.38, 0.26, 34.7, p99=p99_b),
+            ],
+            "cost",
+        )
+        choice = choose_deploy(df)
+        assert (
+            "fsr_onset",
+            ("fsr_onset_logistic",),
+            "the comparison's order (every tie-breaker equal)",
+        ) == (choice.row["estimator"], choice.tied, choice.tie_break)
+
+
+def test_the_verdict_holds_under_timing_noise() -> None:
+    """Injected timing noise (each row's p99 drawn within +-5 % of its own, so two close
+    rows' ratio moves inside the 1.25x band) never changes the verdict of three tied
+    rows; a clearly slower frame still loses the tie."""
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    base = {"a": 30.0, "b": 28.0, "c": 60.0}  # c is a clearly slower frame
+    chosen = set()
+    for _ in range(200):
+        rows = [
+            _row(n, 0.30 + 0.001 * i, 0.05, 20.0, p99=p * rng.uniform(0.95, 1.05))
+            for i, (n, p) in enumerate(base.items())
+        ]
+        chosen.add(choose_deploy(build_table(rows, "cost")).row["estimator"])
+    assert {"a"} == chosen

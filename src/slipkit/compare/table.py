@@ -484,32 +484,56 @@ def _shown(v: float, unit: str) -> str:
     return f"{v * 100:.0f} %" if unit == "%" else f"{v:.3g} {unit}"
 
 
+#: p99s within this factor of the lowest are one timing: a shared machine's p99 moves
+#: this much between runs (the latency rule's borderline band), so such a difference
+#: never breaks a tie and the verdict does not flip with the machine's load
+P99_TIE = 1.25
+
+
+def _table_first(rows: Sequence[pd.Series]) -> pd.Series:
+    """The row that comes first in the comparison's own order (its table index)."""
+    order = [r.name for r in rows]
+    if all(isinstance(i, (int, np.integer)) for i in order):
+        return rows[int(np.argmin(np.asarray(order, dtype=np.int64)))]
+    return rows[0]
+
+
 def break_tie(rows: Sequence[pd.Series]) -> tuple[pd.Series, str]:
     """The row that wins a tie by :data:`TIE_BREAKERS`, and what broke it.
 
     Each breaker in turn keeps the rows of the lowest value (a row without the value
-    loses to one with it); the first breaker that leaves fewer rows is named, e.g.
-    ``lower delay (12 ms against 30 ms for `b`)``; none: the higher score (table order).
+    loses to one with it; p99s within :data:`P99_TIE` of the lowest count as equal);
+    the first breaker that leaves fewer rows is named, e.g. ``lower delay (12 ms
+    against 30 ms for `b`)``. Rows still equal after every breaker: the first in the
+    comparison's order, so two runs choose the same row whatever their timings.
     """
     left = list(rows)
+    named = ""
     for column, what, unit in TIE_BREAKERS:
         vals = [_value(r, column) for r in left]
         finite = [v for v in vals if math.isfinite(v)]
         if not finite:
             continue
         low = min(finite)
-        keep = [r for r, v in zip(left, vals, strict=True) if v == low]
-        if len(keep) < len(left):
+        top = low * P99_TIE if column == "p99_us" else low
+        keep = [
+            r for r, v in zip(left, vals, strict=True) if math.isfinite(v) and v <= top
+        ]
+        if len(keep) < len(left) and not named:
             runner = next(
-                (r for r, v in zip(left, vals, strict=True) if v != low), left[0]
+                (r for r, v in zip(left, vals, strict=True) if not v <= top), left[0]
             )
             other = _value(runner, column)
-            return keep[0], (
+            named = (
                 f"{what} ({_shown(low, unit)} against {_shown(other, unit)} for "
                 f"`{runner['estimator']}`)"
             )
         left = keep
-    return left[0], "the higher mean score (every tie-breaker equal)"
+        if len(left) == 1:
+            break
+    if named:
+        return _table_first(left), named
+    return _table_first(left), "the comparison's order (every tie-breaker equal)"
 
 
 def _margin(r: pd.Series) -> float:
