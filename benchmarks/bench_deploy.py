@@ -539,7 +539,8 @@ def main() -> None:
             from slipkit.families.sliptack.export.detector import SpeedSlipDetector
 
             model = SpeedSlipDetector(speed=model["*"], threshold=0.0).fit()
-        if type(model).__name__ == "DavisOnset":  # the graph's estimator: event frames in
+        # the graph's estimator: event frames in
+        if type(model).__name__ == "DavisOnset":
             from slipkit.export.davis_onset import DavisOnsetScores
 
             model = DavisOnsetScores(detector=model).fit()
