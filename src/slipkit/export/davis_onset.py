@@ -202,54 +202,21 @@ def deploy_davis_onset(
     > 0); debounce :func:`~slipkit.export.deploy_davis.davis_debounce` (the run's
     chosen one).
     """
-    from slipkit.errors import SlipkitError
-    from slipkit.export.deploy import Deployment
-    from slipkit.export.deploy_davis import (
-        DAVIS_REPLAY_BYTES,
-        _davis_held_out,
-        davis_debounce,
-    )
+    from slipkit.export.deploy_davis import event_frame_deployment
 
     det = run.model
-    scores = DavisOnsetScores(detector=det).fit()
-    frame_s, h, w = float(det.frame_s), int(det.height_px), int(det.width_px)
-
-    def check(trial: Any, ev: NDArray[np.float64], frames: NDArray[Any]) -> None:
-        cols = ["pos_area_px", "neg_area_px", "curl"]
-        want = det.frames(ev)[cols].to_numpy(np.float64)
-        got = scores.features(frames)
-        bad = np.flatnonzero(~np.isclose(want, got, rtol=1e-12, atol=1e-9).all(axis=1))
-        if len(bad) or len(want) != len(got):
-            k = int(bad[0]) if len(bad) else min(len(want), len(got))
-            raise SlipkitError(
-                f"trial {trial.trial_id}, frame {k}: the event frame's features differ "
-                f"from DavisOnset.frames ({len(bad)} of {len(frames)} frames); no "
-                "bundle written"
-            )
-
-    trials = _davis_held_out(task, run, dataset, frame_s, h, w, check)
-    channels = [
-        f"{p}_{r}_{c}" for p in ("pos", "neg") for r in range(h) for c in range(w)
-    ]
-    return Deployment(
-        frame={
-            "streams": [task.stream],
-            "channels": channels,
-            "shape": [2, h, w],
-            "window": 1,
-            "hop": 1,
-            "rate_hz": 1.0 / frame_s,
-        },
-        preprocessing=[],
-        export_options={},
-        positive="1",
-        debounce_k=davis_debounce(run, options),
-        trials=trials,
-        model=scores,
-        max_replay_frames=max(1, DAVIS_REPLAY_BYTES // (8 * 2 * h * w)),
+    cols = ["pos_area_px", "neg_area_px", "curl"]
+    return event_frame_deployment(
+        task,
+        run,
+        dataset,
+        options,
+        scores=DavisOnsetScores(detector=det).fit(),
+        shape=(float(det.frame_s), int(det.height_px), int(det.width_px)),
+        own_features=lambda ev: det.frames(ev)[cols].to_numpy(np.float64),
+        source="DavisOnset.frames",
+        atol=1e-9,
         notes=[
-            f"event frames of {frame_s * 1e3:g} ms ({task.stream!r}): counts per pixel, "
-            f"positive then negative, {h} x {w} px",
             f"the graph keeps fired pixels with >= {det.min_neighbours} fired "
             "8-neighbours (Conv), sums their areas and the positive pixels' covariance",
             f"decision: slip when positive area >= {det.min_pos_px} px, negative <= "

@@ -222,39 +222,39 @@ def deploy_area_rule(
     )
 
 
-def _deploy_davis_events(
-    task: Task, run: Run, dataset: Dataset, options: Mapping[str, Any]
+def event_frame_deployment(
+    task: Any,
+    run: Run,
+    dataset: Dataset,
+    options: Mapping[str, Any],
+    *,
+    scores: Any,
+    shape: tuple[float, int, int],
+    own_features: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+    source: str,
+    atol: float,
+    notes: list[str],
 ) -> Deployment:
-    """``DavisRelease`` with the learned ``EventFrameClassifier``: the whole model in the graph.
+    """A DAVIS deployment whose graph reads one whole event frame.
 
-    Frame = one ``frame_s`` (20 ms) event frame as counts per pixel, ``(2, height_px,
-    width_px)``, window 1, hop 1, at ``1 / frame_s`` Hz, no preprocessing: the graph
-    (:mod:`slipkit.export.events`) computes the counts and areas and runs the scaler
-    and logistic regression. The model checked and exported is
-    :class:`slipkit.export.events.EventFrameScores` (the classifier scoring event
-    frames); before anything is written, its features of every held-out frame are
-    checked equal to the classifier's own (``frame_features`` on the events). Slip
-    class ``"1"`` (logit >= 0); debounce :func:`davis_debounce` (the run's chosen one).
+    Frame = one ``frame_s`` event frame as counts per pixel, ``(2, height_px,
+    width_px)`` (``shape`` = (frame_s, height_px, width_px)), window 1, hop 1, at
+    ``1 / frame_s`` Hz, no preprocessing; slip class ``"1"``, debounce
+    :func:`davis_debounce`. Before anything is written, ``scores.features`` of every
+    held-out frame must equal ``own_features`` of the events (the training side's,
+    named ``source`` in the error; ``rtol`` 1e-12, ``atol``).
     """
-    from slipkit.export.events import EventFrameScores
-    from slipkit.train.tasks.davis import DavisRelease
-
-    assert isinstance(task, DavisRelease)
-    clf = run.model
-    scores = EventFrameScores(classifier=clf).fit()
-    frame_s, h, w = float(clf.frame_s), int(clf.height_px), int(clf.width_px)
+    frame_s, h, w = shape
 
     def check(trial: Any, ev: NDArray[np.float64], frames: NDArray[Any]) -> None:
-        # The runtime frames' features against the training-side classifier's, per frame.
-        _, want = clf.frame_features(ev)
+        want = own_features(ev)
         got = scores.features(frames)
-        bad = np.flatnonzero(~np.isclose(want, got, rtol=1e-12, atol=0).all(axis=1))
+        bad = np.flatnonzero(~np.isclose(want, got, rtol=1e-12, atol=atol).all(axis=1))
         if len(bad) or len(want) != len(got):
             k = int(bad[0]) if len(bad) else min(len(want), len(got))
             raise SlipkitError(
                 f"trial {trial.trial_id}, frame {k}: the event frame's features differ "
-                f"from EventFrameClassifier.frame_features ({len(bad)} of {len(frames)} "
-                "frames); no bundle written"
+                f"from {source} ({len(bad)} of {len(frames)} frames); no bundle written"
             )
 
     trials = _davis_held_out(task, run, dataset, frame_s, h, w, check)
@@ -280,6 +280,42 @@ def _deploy_davis_events(
         notes=[
             f"event frames of {frame_s * 1e3:g} ms ({task.stream!r}): counts per pixel, "
             f"positive then negative, {h} x {w} px",
+            *notes,
+        ],
+    )
+
+
+def _deploy_davis_events(
+    task: Task, run: Run, dataset: Dataset, options: Mapping[str, Any]
+) -> Deployment:
+    """``DavisRelease`` with the learned ``EventFrameClassifier``: the whole model in the graph.
+
+    Frame = one ``frame_s`` (20 ms) event frame as counts per pixel, ``(2, height_px,
+    width_px)``, window 1, hop 1, at ``1 / frame_s`` Hz, no preprocessing: the graph
+    (:mod:`slipkit.export.events`) computes the counts and areas and runs the scaler
+    and logistic regression. The model checked and exported is
+    :class:`slipkit.export.events.EventFrameScores` (the classifier scoring event
+    frames); before anything is written, its features of every held-out frame are
+    checked equal to the classifier's own (``frame_features`` on the events). Slip
+    class ``"1"`` (logit >= 0); debounce :func:`davis_debounce` (the run's chosen one).
+    """
+    from slipkit.export.events import EventFrameScores
+    from slipkit.train.tasks.davis import DavisRelease
+
+    assert isinstance(task, DavisRelease)
+    clf = run.model
+    scores = EventFrameScores(classifier=clf).fit()
+    return event_frame_deployment(
+        task,
+        run,
+        dataset,
+        options,
+        scores=scores,
+        shape=(float(clf.frame_s), int(clf.height_px), int(clf.width_px)),
+        own_features=lambda ev: clf.frame_features(ev)[1],
+        source="EventFrameClassifier.frame_features",
+        atol=0.0,
+        notes=[
             "the graph computes the event counts and areas (pixels that fired) per "
             "polarity and runs the scaler and logistic regression (no morphology)",
             "decision: slip when the logit >= 0 (probability >= 1/2)",

@@ -136,7 +136,9 @@ class _Detector:
         return self
 
     def finger_scores(self, frames: FloatArray) -> FloatArray:
-        raise NotImplementedError
+        """The per-frame score of one fingertip's pin frames. Each streaming detector
+        defines its own; a control scores whole trials and has none."""
+        raise TypeError(f"{type(self).__name__} scores whole trials, not frames")
 
     def frame_scores(self, trial: Trial) -> FloatArray:
         """Score per frame over the fingertips (NaN while warming up and after the
