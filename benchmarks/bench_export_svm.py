@@ -9,7 +9,7 @@ one intra-op thread), batch 1, the same held-out frames for every contender:
   :class:`~slipkit.models.svm.TacTipSVM` (scaler + libsvm);
 * ``skl2onnx SVMClassifier``: ``skl2onnx.to_onnx(svm.model_)`` in onnxruntime
   (the ``ai.onnx.ml`` SVM operator, all outputs);
-* ``slipkit graph``: :func:`slipkit.export.svm.export_tactip_svm` (Gemm/Exp) in
+* ``slipkit graph``: :func:`slipkit.families.tactip.export.svm.export_tactip_svm` (Gemm/Exp) in
   onnxruntime, and the same with the pin-velocity features inside (raw pin
   frames in);
 * ``numpy matmul``: the same expansion as the graph, float32 numpy (and with
@@ -47,10 +47,11 @@ from hydra import compose, initialize_config_dir  # noqa: E402
 from onnx import TensorProto, helper  # noqa: E402
 
 from slipkit import config_dir  # noqa: E402
-from slipkit.export import export_tactip_svm, export_velocity_features  # noqa: E402
+from slipkit.export import export_velocity_features  # noqa: E402
 from slipkit.export.parity import check_parity, onnx_session  # noqa: E402
 from slipkit.export.registry import ExportedGraph, finalize_model  # noqa: E402
-from slipkit.features import dataset_features  # noqa: E402
+from slipkit.families.tactip.export.svm import export_tactip_svm  # noqa: E402
+from slipkit.families.tactip.features import dataset_features  # noqa: E402
 from slipkit.features.pins import velocity_features  # noqa: E402
 from slipkit.models import TacTipSVM  # noqa: E402
 from slipkit.sim.commands import build_scene  # noqa: E402

@@ -181,7 +181,7 @@ def svm_vs_nystroem(base_trials: int, seed: int = 0) -> list[dict[str, float | s
     from sklearn.metrics import balanced_accuracy_score
 
     from slipkit import config_dir
-    from slipkit.features.tactip import dataset_features
+    from slipkit.families.tactip.features import dataset_features
     from slipkit.sim.commands import build_scene
 
     scene_cfg = OmegaConf.load(config_dir() / "scene" / "tactip_gravity_drop.yaml")

@@ -8,7 +8,7 @@ the 331-pin test half with estimators fitted
 * on the 331-pin training half ("331 -> 331"), and
 * on every 127-pin trial ("127 -> 331"; the per-pin SVM cannot run there).
 
-Estimators: :class:`~slipkit.baselines.tactip.PinMotionDetector` (``reversal`` and
+Estimators: :class:`~slipkit.families.tactip.detector.PinMotionDetector` (``reversal`` and
 ``coherent`` scores; threshold from the detector's per-trial ROC of the training side,
 as ``configs/experiment/tactip_alignment.yaml``) and :class:`~slipkit.models.svm.TacTipSVM`
 with per-pin (the paper's) and pooled features (``configs/model/*.yaml``), trained on
@@ -39,10 +39,10 @@ from slipkit import config_dir
 from slipkit.data.dataset import Dataset
 from slipkit.data.splits import split_by_trial
 from slipkit.errors import SlipkitError
-from slipkit.features.tactip import dataset_features
+from slipkit.families.tactip.features import dataset_features
+from slipkit.families.tactip.task import _check_pin_count
 from slipkit.models.online import first_detection
 from slipkit.sim.commands import build_scene
-from slipkit.train.tasks.tactip import _check_pin_count
 
 
 def _cfg(overrides: list[str]) -> Any:

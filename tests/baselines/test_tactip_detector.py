@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from slipkit.baselines.tactip import PinMotionDetector
-from slipkit.features.tactip import POOLED_NAMES, pooled_features
+from slipkit.families.tactip.detector import PinMotionDetector
+from slipkit.features.pins import POOLED_NAMES, pooled_features
 
 
 def stretch_then_snap(

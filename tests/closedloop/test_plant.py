@@ -14,7 +14,7 @@ from slipkit.closedloop.plant import (
     slip_distance_driven,
 )
 from slipkit.errors import SlipkitError
-from slipkit.physics.tactip import slip_indentation_mm
+from slipkit.families.tactip.physics import slip_indentation_mm
 
 
 def _plant(**kw):  # type: ignore[no-untyped-def]
@@ -130,8 +130,8 @@ def test_plant_refuses_kinetic_above_static_friction() -> None:
 
 
 def test_plant_force_is_the_scene_hertz_law() -> None:
-    """The plant's grip force equals slipkit.physics.tactip.normal_force_N (the scene's law)."""
-    from slipkit.physics.tactip import normal_force_N
+    """The plant's grip force equals slipkit.families.tactip.physics.normal_force_N (the scene's law)."""
+    from slipkit.families.tactip.physics import normal_force_N
 
     plant = _plant()
     depths = [0.0, 0.3, 1.7, 3.0, 5.0]

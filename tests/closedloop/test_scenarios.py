@@ -10,8 +10,8 @@ from slipkit.closedloop.scenarios import (
     get_scenario,
     register_scenario,
 )
-from slipkit.closedloop.tactip import TacTipScenario
 from slipkit.errors import SlipkitError
+from slipkit.families.tactip.scenario import TacTipScenario
 
 
 def test_tactip_is_registered_under_its_family_name() -> None:

@@ -15,8 +15,8 @@ from slipkit import config_dir
 from slipkit.closedloop.commands import closedloop_main
 from slipkit.closedloop.detectors import Detector
 from slipkit.closedloop.plant import PlantState
-from slipkit.closedloop.tactip import check_frame, pin_channels
 from slipkit.errors import SlipkitError
+from slipkit.families.tactip.scenario import check_frame, pin_channels
 
 
 def _run(overrides: list[str]) -> None:

@@ -15,8 +15,8 @@ from omegaconf import OmegaConf
 from slipkit import config_dir
 from slipkit.closedloop.commands import closedloop_main
 from slipkit.closedloop.plant import PlantState
-from slipkit.closedloop.tactip import TacTipSensor, draw_trial
 from slipkit.errors import SlipkitError
+from slipkit.families.tactip.scenario import TacTipSensor, draw_trial
 from slipkit.sim.commands import build_scene
 
 

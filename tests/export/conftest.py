@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 from slipkit import config_dir
 from slipkit.data import split_by_trial
 from slipkit.data.dataset import Dataset
-from slipkit.features import dataset_features
+from slipkit.families.tactip.features import dataset_features
 from slipkit.sim.commands import build_scene
 
 

@@ -14,7 +14,6 @@ from slipkit.export import (
     ExportError,
     NoExporterError,
     export,
-    export_tactip_svm,
     exporter_for,
     register_exporter,
 )
@@ -25,6 +24,7 @@ from slipkit.export.registry import (
     registered,
     unregister_exporter,
 )
+from slipkit.families.tactip.export.svm import export_tactip_svm
 from slipkit.models import TacTipSVM
 
 

@@ -13,10 +13,10 @@ from sklearn.datasets import make_classification
 from slipkit.export import (
     ExportError,
     check_parity,
-    export_tactip_svm,
     export_velocity_features,
 )
 from slipkit.export.parity import onnx_session, run_graph
+from slipkit.families.tactip.export.svm import export_tactip_svm
 from slipkit.features.pins import circular_mean, velocity_features, wrap_angle
 from slipkit.models import TacTipSVM
 

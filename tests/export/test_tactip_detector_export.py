@@ -8,15 +8,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from slipkit.baselines.tactip import PinMotionDetector
 from slipkit.errors import SlipkitError
-from slipkit.export import ExportError, check_parity, export, export_tactip_svm
+from slipkit.export import ExportError, check_parity, export
 from slipkit.export.detectors import DetectorGraph, check_detector_parity
 from slipkit.export.parity import run_graph
-from slipkit.features.pins import velocity_features
-from slipkit.features.tactip import DatasetFeatures, pooled_features
+from slipkit.families.tactip.detector import PinMotionDetector
+from slipkit.families.tactip.export.svm import export_tactip_svm
+from slipkit.families.tactip.features import DatasetFeatures
+from slipkit.families.tactip.task import _check_pin_count
+from slipkit.features.pins import pooled_features, velocity_features
 from slipkit.models import TacTipSVM
-from slipkit.train.tasks.tactip import _check_pin_count
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "baselines"))
 from test_tactip_detector import stretch_then_snap

@@ -14,21 +14,20 @@ from hypothesis.extra.numpy import arrays
 from scipy.stats import circmean
 
 from slipkit import config_dir
+from slipkit.families.tactip.features import dataset_features, trial_features
+from slipkit.families.tactip.physics import pin_layout
 from slipkit.features import (
     SLIP,
     STATIC,
     circular_mean,
-    dataset_features,
     feature_names,
     frame_labels,
     onset_velocity_index,
     pin_velocities,
-    trial_features,
     velocity_features,
     wrap_angle,
 )
 from slipkit.features.pins import RESULTANT_EPS
-from slipkit.physics.tactip import pin_layout
 from slipkit.sim.commands import build_scene
 
 FAST = settings(max_examples=60, deadline=None)

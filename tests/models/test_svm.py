@@ -18,7 +18,8 @@ from sklearn.utils.estimator_checks import parametrize_with_checks
 
 from slipkit import config_dir
 from slipkit.data import split_by_trial
-from slipkit.features import SLIP, STATIC, dataset_features, trial_features
+from slipkit.families.tactip.features import dataset_features, trial_features
+from slipkit.features import SLIP, STATIC
 from slipkit.models import (
     TacTipSVM,
     debounce,

@@ -134,7 +134,7 @@ def test_native_rbf_kernel_values_stay_in_unit_interval() -> None:
 
 def test_exported_rbf_kernel_values_stay_in_unit_interval() -> None:
     """The exported graph's kernel values at the support vectors themselves are at most 1."""
-    from slipkit.export.svm import export_tactip_svm
+    from slipkit.families.tactip.export.svm import export_tactip_svm
 
     rng = np.random.default_rng(1)
     X = 30 * rng.normal(size=(200, 20))

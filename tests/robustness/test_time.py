@@ -16,9 +16,9 @@ from slipkit._files import sha256_file
 from slipkit.data import Trial
 from slipkit.data.io import load_dataset, save_dataset
 from slipkit.errors import DatasetError
+from slipkit.families.tactip.features import trial_features
+from slipkit.families.tactip.physics import pin_channels
 from slipkit.features.pins import onset_velocity_index
-from slipkit.features.tactip import trial_features
-from slipkit.physics.tactip import pin_channels
 
 
 def _rewrite_force(path: Path, edit: object) -> None:

@@ -14,10 +14,10 @@ from sklearn.metrics import balanced_accuracy_score
 from slipkit import config_dir
 from slipkit.data import Dataset, load_dataset
 from slipkit.data.io import save_dataset
+from slipkit.families.tactip.features import dataset_features
+from slipkit.families.tactip.physics import split_pins
 from slipkit.features.pins import frame_labels, onset_velocity_index
-from slipkit.features.tactip import dataset_features
 from slipkit.models.svm import TacTipSVM
-from slipkit.physics.tactip import split_pins
 from slipkit.sim import Scene
 from slipkit.sim.commands import build_scene
 from slipkit.sim.core import EFFECT_DRAWS, effect_name

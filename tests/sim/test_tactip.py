@@ -15,7 +15,7 @@ from slipkit import config_dir
 from slipkit.cli import main as cli_main
 from slipkit.data import load_dataset
 from slipkit.data.dataset import Trial
-from slipkit.physics.tactip import (
+from slipkit.families.tactip.physics import (
     contact_semi_axes,
     contact_weights,
     join_pins,
@@ -26,9 +26,9 @@ from slipkit.physics.tactip import (
     pins_in_rings,
     split_pins,
 )
+from slipkit.families.tactip.scene import TacTipGravityDrop
 from slipkit.sim.commands import build_scene
 from slipkit.sim.core import Scene, SimulationError
-from slipkit.sim.scenes.tactip import TacTipGravityDrop
 
 SCENE = "tactip_gravity_drop"
 

@@ -21,18 +21,18 @@ import slipkit
 from slipkit.data.dataset import Dataset
 from slipkit.data.io import save_dataset
 from slipkit.errors import SlipkitError
-from slipkit.models.svm import TacTipSVM
-from slipkit.sim.commands import build_scene
-from slipkit.train import search as search_module
-from slipkit.train.commands import evaluate_main, train_main
-from slipkit.train.runs import read_run
-from slipkit.train.tasks import tactip as tactip_module
-from slipkit.train.tasks.tactip_table import (
+from slipkit.families.tactip import task as tactip_module
+from slipkit.families.tactip.task_table import (
     LINEAR_DEFAULT_C,
     PAPER_TABLE1,
     TacTipTable1,
     _majority,
 )
+from slipkit.models.svm import TacTipSVM
+from slipkit.sim.commands import build_scene
+from slipkit.train import search as search_module
+from slipkit.train.commands import evaluate_main, train_main
+from slipkit.train.runs import read_run
 
 #: Short trials of 19 pins (the centre and two rings) keep every run around a second.
 SMALL_SCENE = [

@@ -13,7 +13,7 @@ drop). Coulomb friction decides (Johnson, *Contact Mechanics*, 1985, Sec. 7.1):
 The fingertip is moved by an arm: the controller commands the arm's velocity (mm/s,
 positive presses in), the :class:`Actuator` delivers it after a pure latency and a
 first-order lag, the indentation ``delta`` integrates the arm velocity and the normal
-force follows the Hertz law ``F_n = K delta^1.5`` (:func:`slipkit.physics.tactip.normal_force_N`,
+force follows the Hertz law ``F_n = K delta^1.5`` (:func:`slipkit.families.tactip.physics.normal_force_N`,
 the law the TacTip scene uses). The plant is stepped once per sensor frame and
 integrated inside the frame with ``substeps`` semi-implicit Euler steps, so the onset
 and the arrest fall within a frame, not on frame boundaries.
@@ -309,7 +309,7 @@ class GraspPlant:
     def force(self, indentation_mm: float) -> float:
         """Normal force at an indentation, N (Hertz, ``K delta^1.5``).
 
-        The scalar form of :func:`slipkit.physics.tactip.normal_force_N` (the numpy
+        The scalar form of :func:`slipkit.families.tactip.physics.normal_force_N` (the numpy
         call costs more than the arithmetic on one float; a test checks they agree).
         """
         return self.stiffness * max(indentation_mm, 0.0) ** 1.5

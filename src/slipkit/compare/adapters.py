@@ -160,6 +160,25 @@ def register_adapter(task_cls: type, fn: Adapter, *, overwrite: bool = False) ->
     _ADAPTERS.register(task_cls, fn, overwrite=overwrite)
 
 
+#: A family's trial-event measure of a stream detector's run: ``(view, recordings,
+#: test scores, row so far) -> (columns, per-trial table)``, by the dataset's sensor.
+TrialEvents = Callable[
+    [RunView, Any, np.ndarray, Mapping[str, Any]],
+    tuple[dict[str, Any], pd.DataFrame | None],
+]
+_TRIAL_EVENTS: Registry[str, TrialEvents] = Registry(
+    "stream detector trial-event measure", error=SlipkitError, n_args=4, key_type=str
+)
+
+
+def register_trial_events(
+    sensor: str, fn: TrialEvents, *, overwrite: bool = False
+) -> None:
+    """Score the stream detectors of ``sensor``'s datasets also by ``fn``'s trial events
+    (:func:`adapt_detection` adds its columns and table, e.g. TacTip's on-time rate)."""
+    _TRIAL_EVENTS.register(sensor, fn, overwrite=overwrite)
+
+
 def adapt(view: RunView) -> Evaluation:
     """The unified evaluation of ``view`` by the adapter of its task's class (family
     folders' adapters, ``slipkit.families.PLUGIN_MODULES["adapters"]``, register first)."""
@@ -345,70 +364,6 @@ def stream_task_events(
     return trial_events(list(trial_ids), onsets, firsts)
 
 
-# -- TacTip frames --------------------------------------------------------------------
-
-
-def adapt_tactip(view: RunView) -> Evaluation:
-    """TacTip per-frame slip / static (:class:`~slipkit.train.tasks.tactip.TacTipFrames`)."""
-    from slipkit.features.pins import SLIP
-
-    task: Any = view.task
-    test = view.metrics["test"]
-    labels = [str(x) for x in test["labels"]]
-    cm = np.asarray(test["confusion"])
-    row: dict[str, Any] = binary_rates(cm) if labels[-1] == SLIP else {}
-    det = test["detection"]
-    rate = task.rate_hz(view.dataset)
-    k = int(det["debounce_k"])  # the deployed debounce (chosen on validation)
-    preds = pd.read_csv(view.folder / "test_predictions.csv")
-    events, event_table = frame_task_events(preds, SLIP, k)
-    row.update(events)
-    point = dict(view.metrics.get("operating_point") or {})
-    row.update(event_row(test["operating_point"], str(point.get("from", ""))))
-    delays = (
-        [float(v) for v in _event_delays(view.folder / "test_events.csv")]
-        if (view.folder / "test_events.csv").is_file()
-        else [d * 1000.0 / rate for d in det["delay_frames"] if d is not None]
-    )
-    row.update(
-        window_frames=2,  # a pin velocity is the difference of two frames
-        window_ms=2 * 1000.0 / rate,
-        decision_frames=2 + k - 1,
-    )
-    roc = None
-    if hasattr(view.model, "decision_function"):
-        test_ds = view.dataset.subset(list(view.metrics["split"]["test"]))
-        feats = task.features(test_ds)
-        scores = np.asarray(view.model.decision_function(feats.X), dtype=float)
-        classes = [str(c) for c in getattr(view.model, "classes_", ["", SLIP])]
-        if (
-            classes[-1] != SLIP
-        ):  # a binary decision_function is positive for classes_[1]
-            scores = -scores
-        roc = _roc(
-            feats.y == SLIP,
-            scores,
-            (row.get("fpr", math.nan), row.get("tpr", math.nan)),
-            "frames",
-        )
-        if roc is not None:
-            row["roc_auc"] = roc["auc"]
-    search = None
-    history = (view.metrics.get("search") or {}).get("history")
-    if history:
-        search = pd.DataFrame(history)[["number", "value"]]
-        row["search_trials"] = len(search)
-    return Evaluation(
-        row=row,
-        confusion=(labels, cm),
-        roc=roc,
-        delays_ms=delays,
-        split=view.metrics["split"],
-        search=search,
-        trial_events=event_table,
-    )
-
-
 # -- window classification ------------------------------------------------------------------
 
 
@@ -533,20 +488,9 @@ def adapt_detection(view: RunView) -> Evaluation:
     scores = np.asarray(view.model.decision_function(rec.X, segments=rec.segments))
     roc = _roc(rec.y > 0, scores, (row["fpr"], row["tpr"]), "samples")
     event_table = None
-    if str(view.dataset.sensor) == "tactip":
-        # the TacTip event measure, on the frames the frame task scores (module notes);
-        # the task's own rule: slip where the score reaches the threshold
-        from slipkit.evaluate.events import alarm_indices
-
-        fired = np.zeros(len(scores), dtype=bool)
-        k = int(row["debounce_k"]) if math.isfinite(row["debounce_k"]) else 1
-        for a, b in rec.bounds():  # the deployed rule: the k-th sample >= threshold
-            fired[a + alarm_indices(scores[a:b], float(view.model.threshold_), k)] = (
-                True
-            )
-        events, event_table = stream_task_events(
-            rec.t, fired, rec.bounds(), rec.onset_s, rec.trial_ids
-        )
+    trial_measure = _TRIAL_EVENTS.get(str(view.dataset.sensor))
+    if trial_measure is not None:  # the sensor family's own trial-event measure
+        events, event_table = trial_measure(view, rec, scores, row)
         row.update(events)
     return Evaluation(
         row=row,
@@ -670,9 +614,7 @@ def _register_builtin() -> None:
     from slipkit.train.tasks.detection import StreamDetection
     from slipkit.train.tasks.force import ForceRegression
     from slipkit.train.tasks.slip_type import WindowClassification
-    from slipkit.train.tasks.tactip import TacTipFrames
 
-    register_adapter(TacTipFrames, adapt_tactip)
     register_adapter(WindowClassification, adapt_windows)
     register_adapter(StreamDetection, adapt_detection)
     register_adapter(ForceRegression, adapt_force)
@@ -690,6 +632,7 @@ __all__ = [
     "binary_rates",
     "frame_task_events",
     "register_adapter",
+    "register_trial_events",
     "stream_task_events",
     "trial_events",
 ]

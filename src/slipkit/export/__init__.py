@@ -3,10 +3,10 @@
 Importing this package registers every exporter (one module per family, each
 ending with its ``register_exporter`` call, as sklearn-onnx's converters):
 
-* :mod:`slipkit.export.svm` -- ``TacTipSVM`` as MatMul/Exp ops, optionally with the
-  pin-velocity features inside (:mod:`slipkit.export.pins`);
 * :mod:`slipkit.export.sklearn` -- every class skl2onnx converts, Pipelines included;
-* :mod:`slipkit.export.torch` -- torch modules and skorch nets (legacy exporter).
+* :mod:`slipkit.export.torch` -- torch modules and skorch nets (legacy exporter);
+* the family folders' exporters (``slipkit.families.PLUGIN_MODULES["exporters"]``, e.g.
+  ``TacTipSVM`` as MatMul/Exp ops in :mod:`slipkit.families.tactip.export.svm`).
 
 :func:`export` picks the exporter by the estimator's class (MRO walk) and
 :func:`slipkit.export.parity.check_parity` compares the graph in onnxruntime with
@@ -25,8 +25,6 @@ from slipkit.export import force as _force  # noqa: F401
 from slipkit.export import frame_gru as _frame_gru  # noqa: F401
 from slipkit.export import generic as _generic  # noqa: F401
 from slipkit.export import sklearn as _sklearn  # noqa: F401
-from slipkit.export import svm as _svm  # noqa: F401
-from slipkit.export import tactip_detector as _tactip_detector  # noqa: F401
 from slipkit.export import torch as _torch  # noqa: F401
 from slipkit.export import window_analytic as _window_analytic  # noqa: F401
 from slipkit.export import window_stats as _window_stats  # noqa: F401
@@ -44,7 +42,6 @@ from slipkit.export.registry import (
     register_runtime_steps,
 )
 from slipkit.export.sklearn import export_sklearn
-from slipkit.export.svm import export_tactip_svm
 from slipkit.export.torch import (
     export_skorch_estimator,
     export_torch_module,
@@ -67,7 +64,6 @@ __all__ = [
     "export",
     "export_sklearn",
     "export_skorch_estimator",
-    "export_tactip_svm",
     "export_torch_module",
     "export_velocity_features",
     "exporter_for",

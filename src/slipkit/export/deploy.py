@@ -26,14 +26,9 @@ the loop will feed the graph.
 
 Per task
 --------
-``TacTipFrames``
-    Frame = the ``pins`` stream (``x0..x{N-1}, y0..y{N-1}``, mm), window 2, hop 1; the
-    pin-velocity features are inside the graph (``with_features=True``). One
-    preprocessing step: ``subtract`` a fixed reference frame (the median first frame
-    of the training trials) in float64 before the float32 cast of the graph input:
-    absolute positions of ~10 mm in float32 have ~1e-6 mm resolution, resting pins
-    move ~1e-3 mm per frame, and the offset cancels in the velocity
-    (``docs/export.md``). Slip class ``slip``; debounce ``task.debounce_k``.
+Family folders' deployers document their own tasks (e.g. TacTip's frame task in
+``slipkit.families.tactip.deploy``).
+
 ``ForceRegression``
     Frame = one electrode frame (window 1, hop 1). With ``baseline: first`` one
     step, ``baseline_first`` (``frames = task.baseline_frames``): the runtime takes
@@ -630,67 +625,6 @@ def _frame(
     }
 
 
-# -- TacTip ---------------------------------------------------------------------------
-
-
-def _deploy_tactip(
-    task: Task, run: Run, dataset: Dataset, options: Mapping[str, Any]
-) -> Deployment:
-    from slipkit.data.splits import split_by_trial
-    from slipkit.features.pins import SLIP
-    from slipkit.train.tasks.tactip import TacTipFrames
-
-    assert isinstance(task, TacTipFrames)
-    from slipkit.models.svm import TacTipSVM
-
-    if not isinstance(run.model, TacTipSVM):
-        # the deployed graph computes the pin-velocity features itself (export/pins.py)
-        # in front of the SVM's Gemm/Exp graph; other frame classifiers have no such graph
-        raise SlipkitError(
-            f"run {run.path}: a TacTip frame bundle needs a TacTipSVM (the pin features "
-            f"are computed inside its graph); this run's model is "
-            f"{type(run.model).__name__}, which slipkit cannot export for TacTip frames "
-            "(e.g. configs/model/tactip_nystroem.yaml is for benchmarks/bench_scale.py)"
-        )
-    stream = task.stream
-    rate = _rate(dataset, stream, options)
-    channels = list(dataset.streams[stream].channels)
-    split = run_metrics(run).get("split", {})
-    seed = int(run.config.get("seed", 0))
-    if split.get("test"):
-        train_ids, test_ids = list(split["train"]), list(split["test"])
-    else:  # recompute the task's split (same seed, same call)
-        s = split_by_trial(dataset, test_size=task.test_size, val_size=0.0, seed=seed)
-        train_ids, test_ids = list(s.train), list(s.test)
-    # The fixed reference frame: the median first frame of the training trials (NaN
-    # for a pin never seen is 0: it only has to be finite and near the positions).
-    firsts = np.stack(
-        [tr.frames[0] for tr in trial_frames(dataset, train_ids, stream, channels)]
-    )
-    with np.errstate(all="ignore"):
-        ref = np.nanmedian(np.where(np.isfinite(firsts), firsts, np.nan), axis=0)
-    ref = np.where(np.isfinite(ref), ref, 0.0)
-    return Deployment(
-        frame=_frame([stream], channels, 2, 1, rate),
-        preprocessing=[{"op": "subtract", "value": np.round(ref, 6).tolist()}],
-        # n_pins: the stream's pin count (a per-pin SVM trained on another refuses it)
-        export_options={
-            "with_features": True,
-            "variant": task.variant,
-            "n_pins": len(channels) // 2,
-        },
-        positive=SLIP,
-        debounce_k=int(task.debounce_k),
-        trials=trial_frames(dataset, test_ids, stream, channels),
-        notes=[
-            "raw pin positions in (x block, y block, mm); the graph computes the "
-            f"{task.variant} pin-velocity features of the last two frames",
-            "preprocessing subtracts a fixed reference frame (median first frame of "
-            "the training trials) in float64 before the float32 cast",
-        ],
-    )
-
-
 # -- force regression -------------------------------------------------------------------
 
 
@@ -859,9 +793,7 @@ def _register_builtin() -> None:
     from slipkit.train.tasks.detection import StreamDetection
     from slipkit.train.tasks.force import ForceRegression
     from slipkit.train.tasks.slip_type import WindowClassification
-    from slipkit.train.tasks.tactip import TacTipFrames
 
-    register_deployer(TacTipFrames, _deploy_tactip)
     register_deployer(ForceRegression, _deploy_force)
     register_deployer(WindowClassification, _deploy_windows)
     from slipkit.export.deploy_detection import _deploy_detection

@@ -3,7 +3,7 @@
 Registered for every class skl2onnx can convert (its
 ``sklearn_operator_name_map``: linear models, scalers, SVMs, trees, Pipeline,
 ColumnTransformer, ...). slipkit's own estimators register their own exporters
-(e.g. :mod:`slipkit.export.svm`), which win because they sit earlier in the MRO.
+(e.g. :mod:`slipkit.families.tactip.export.svm`), which win because they sit earlier in the MRO.
 
 The score
 ---------

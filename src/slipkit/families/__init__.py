@@ -10,7 +10,7 @@ scene and scenario resolves, each config and doc page exists.
 
 The records hold strings only, resolved on demand (:func:`resolve`), so this module imports
 nothing of the stages and any stage may read it. A family packaged as one folder lives in
-``slipkit/families/<name>/`` (``gelsight``, ``sliptack``, ``fsr``); :data:`PLUGIN_MODULES` names the
+``slipkit/families/<name>/`` (``gelsight``, ``sliptack``, ``fsr``, ``tactip``); :data:`PLUGIN_MODULES` names the
 modules of such folders that register plug-ins when imported, by kind, and the stage owning a
 kind imports them by name (:func:`load_plugins`), never statically.
 """
@@ -75,6 +75,8 @@ _SLIPTACK_EXPORTERS = tuple(
 )
 _FSR = "slipkit.families.fsr."
 _FSR_EXPORTERS = (_FSR + "export.touch_slip", _FSR + "export.onset")
+_TT = "slipkit.families.tactip."
+_TACTIP_EXPORTERS = (_TT + "export.svm", _TT + "export.detector")
 
 FAMILIES: dict[str, Family] = {
     f.name: f
@@ -82,18 +84,15 @@ FAMILIES: dict[str, Family] = {
         Family(
             name="tactip",
             sensor="tactip",
-            tasks=(
-                _T + "tactip:TacTipFrames",
-                _T + "tactip_table:TacTipTable1",
-                _DETECT,
-            ),
-            deploys=(_T + "tactip:TacTipFrames", _DETECT),
-            compares=(_T + "tactip:TacTipFrames", _DETECT),
-            exporters=("slipkit.export.svm", "slipkit.export.tactip_detector"),
+            tasks=(_TT + "task:TacTipFrames", _TT + "task_table:TacTipTable1", _DETECT),
+            deploys=(_TT + "task:TacTipFrames", _DETECT),
+            compares=(_TT + "task:TacTipFrames", _DETECT),
+            exporters=_TACTIP_EXPORTERS,
             scenes=("tactip_gravity_drop", "tactip_gravity_drop_hard"),
             comparisons=("tactip",),
             scenario="tactip",
             docs=("simulation/tactip.md", "models/tactip.md"),
+            detectors=(_TT + "detector",),
         ),
         Family(
             name="biotac",
@@ -197,11 +196,12 @@ PLUGIN_MODULES: dict[str, tuple[str, ...]] = {
         "slipkit.families.gelsight.export",
         *_SLIPTACK_EXPORTERS,
         *_FSR_EXPORTERS,
+        *_TACTIP_EXPORTERS,
     ),
-    "deployers": (_ST + "deploy",),
-    "adapters": (_ST + "adapter",),
-    "scenarios": (_ST + "scenario", _FSR + "scenario"),
-    "effects": (_ST + "effects", _FSR + "effects"),
+    "deployers": (_ST + "deploy", _TT + "deploy"),
+    "adapters": (_ST + "adapter", _TT + "adapter"),
+    "scenarios": (_ST + "scenario", _FSR + "scenario", _TT + "scenario"),
+    "effects": (_ST + "effects", _FSR + "effects", _TT + "effects"),
     "tasks": (_ST + "task",),
 }
 

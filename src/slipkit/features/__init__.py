@@ -1,4 +1,5 @@
-"""Features computed from sensor streams (numpy only, so the runtime can reuse them)."""
+"""Features computed from sensor streams (numpy only, so the runtime can reuse them); a
+family's trial and dataset readers live in its folder (``slipkit.families.<family>``)."""
 
 from slipkit.features.pins import (
     SLIP,
@@ -11,25 +12,15 @@ from slipkit.features.pins import (
     velocity_features,
     wrap_angle,
 )
-from slipkit.features.tactip import (
-    DatasetFeatures,
-    TrialFeatures,
-    dataset_features,
-    trial_features,
-)
 
 __all__ = [
     "SLIP",
     "STATIC",
-    "DatasetFeatures",
-    "TrialFeatures",
     "circular_mean",
-    "dataset_features",
     "feature_names",
     "frame_labels",
     "onset_velocity_index",
     "pin_velocities",
-    "trial_features",
     "velocity_features",
     "wrap_angle",
 ]

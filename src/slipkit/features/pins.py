@@ -269,3 +269,64 @@ def frame_labels(
     stop = n_frames if n_slip is None else onset_frame + n_slip
     labels[onset_frame:stop] = SLIP
     return labels
+
+
+#: Names of :func:`pooled_features`, in column order.
+POOLED_NAMES: tuple[str, ...] = (
+    "speed_mean",
+    "speed_rms",
+    "speed_max",
+    "resultant",
+    "velocity_mean",
+    "alignment",
+)
+
+
+def pooled_features(X: NDArray[np.float64] | list[list[float]]) -> NDArray[np.float64]:
+    """Pin-count-independent statistics of per-pin ``dr_dtheta`` feature rows.
+
+    A pin is *present* in a velocity frame when its ``dr`` is above 0: the per-pin
+    features give a missing (NaN) pin ``dr = 0`` and no angle
+    (:mod:`slipkit.features.pins`), so every statistic below is a mean over the
+    present pins only (a still pin, exactly 0 mm/frame, has no direction either).
+    The angles may be shifted by their circular mean (the paper's features) or
+    not: every statistic is invariant to a common rotation.
+
+    Parameters
+    ----------
+    X : array_like of shape (n_frames, 2 N)
+        ``dr_0 .. dr_{N-1}`` (mm/frame) then ``dtheta_0 .. dtheta_{N-1}`` (rad),
+        any pin count ``N``.
+
+    Returns
+    -------
+    ndarray of shape (n_frames, 6)
+        Columns :data:`POOLED_NAMES`: mean, RMS and largest pin speed (mm/frame);
+        the resultant length of the unit velocities ``R = |mean exp(i dtheta)|``
+        (0..1, 1 = every present pin moves the same way); the length of the mean
+        velocity vector ``|mean dr exp(i dtheta)|`` (mm/frame); and
+        ``speed_mean * R`` (mm/frame), how fast the pins move together. A frame
+        with no present pin is all zeros.
+    """
+    arr = np.asarray(X, dtype=np.float64)
+    if arr.ndim != 2 or arr.shape[1] < 2 or arr.shape[1] % 2:
+        raise ValueError(
+            "pooled features need per-pin dr_dtheta rows of shape (n_frames, 2 N); "
+            f"got {arr.shape}"
+        )
+    n = arr.shape[1] // 2
+    dr, theta = arr[:, :n], arr[:, n:]
+    present = dr > 0
+    count = np.maximum(present.sum(axis=1), 1).astype(np.float64)
+    drp = np.where(present, dr, 0.0)
+    c = np.where(present, np.cos(theta), 0.0)
+    s = np.where(present, np.sin(theta), 0.0)
+    speed_mean = drp.sum(axis=1) / count
+    speed_rms = np.sqrt((drp * drp).sum(axis=1) / count)
+    speed_max = drp.max(axis=1)
+    resultant = np.hypot(c.sum(axis=1), s.sum(axis=1)) / count
+    velocity = np.hypot((drp * c).sum(axis=1), (drp * s).sum(axis=1)) / count
+    return np.stack(
+        [speed_mean, speed_rms, speed_max, resultant, velocity, speed_mean * resultant],
+        axis=1,
+    )

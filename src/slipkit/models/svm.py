@@ -70,7 +70,7 @@ class TacTipSVM(ClassifierMixin, BaseEstimator):
         per pin and kind, tied to the pin count). ``"pooled"``: the rows must be
         per-pin ``dr_dtheta`` features of any pin count, reduced to the six
         pin-count-independent statistics of
-        :func:`slipkit.features.tactip.pooled_features` (pin speeds, resultant
+        :func:`slipkit.features.pins.pooled_features` (pin speeds, resultant
         length of the directions, mean velocity; missing pins ignored), so a model
         trained on 127 pins scores 331. Use with ``standardize=True``: the
         statistics mix mm/frame and a 0..1 ratio.
@@ -153,7 +153,7 @@ class TacTipSVM(ClassifierMixin, BaseEstimator):
         if self.features != "pooled":
             return X
         # Pooled statistics of any pin count: the width check is pooled_features's.
-        from slipkit.features.tactip import pooled_features
+        from slipkit.features.pins import pooled_features
 
         return pooled_features(check_array(X, dtype=np.float64))
 

@@ -254,7 +254,7 @@ class _PinVelocityFeatures:
         self._dxy = np.empty((in_shape[0] - 1, self._n, 2))
 
     def __call__(self, x: Array) -> Array:
-        # Stream layout is an x block then a y block (slipkit.physics.tactip.pin_channels);
+        # Stream layout is an x block then a y block (slipkit.families.tactip.physics.pin_channels);
         # velocity_features wants (..., N, 2).
         n = self._n
         np.subtract(x[1:, :n], x[:-1, :n], out=self._dxy[..., 0])

@@ -406,7 +406,7 @@ def check_fits_run(run: Any, dataset: Any, where: Path) -> None:
         elif (
             want
             and want != have
-            # pooled TacTip models read any pin count (slipkit.baselines.tactip)
+            # pooled TacTip models read any pin count (slipkit.families.tactip.detector)
             and not getattr(run.model, "pin_count_independent", False)
         ):
             raise SlipkitError(

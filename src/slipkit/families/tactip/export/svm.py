@@ -144,7 +144,7 @@ def export_tactip_svm(
         Pins per frame of the stream the graph reads. Required for
         ``features="pooled"`` (the input is then per-pin ``dr_dtheta`` features, or
         raw pins with ``with_features``, and the pooled statistics are computed in
-        the graph: :func:`slipkit.export.tactip_detector.pooled_feature_nodes`); for
+        the graph: :func:`slipkit.families.tactip.export.detector.pooled_feature_nodes`); for
         per-pin features it must match the pins the SVM was trained on.
     opset : int
         Default-domain opset (17 or 18).
@@ -208,7 +208,10 @@ def export_tactip_svm(
         )
         features = None
     if pooled:
-        from slipkit.export.tactip_detector import pooled_feature_nodes, pooled_spec
+        from slipkit.families.tactip.export.detector import (
+            pooled_feature_nodes,
+            pooled_spec,
+        )
 
         x = pooled_feature_nodes(g, x, int(n_pins or 0))
         features = {**(features or {}), **pooled_spec(int(n_pins or 0))}

@@ -1,11 +1,11 @@
 """Exporters for the pin-count-independent TacTip estimators.
 
-* :class:`~slipkit.baselines.tactip.PinMotionDetector` as a
+* :class:`~slipkit.families.tactip.detector.PinMotionDetector` as a
   :class:`~slipkit.export.detectors.DetectorGraph`: a window of the last ``W = span +
   consecutive`` raw pin frames ``(batch, W, 2N)`` (mm, NaN for a pin not detected,
   oldest first) -> ``score`` ``(batch,)`` mm/frame, the batch detector's
   ``decision_function`` at the window's last frame.
-* :func:`pooled_feature_nodes`: :func:`slipkit.features.tactip.pooled_features` as
+* :func:`pooled_feature_nodes`: :func:`slipkit.features.pins.pooled_features` as
   ONNX ops on the per-pin ``dr_dtheta`` features, used by the
   :class:`~slipkit.models.svm.TacTipSVM` exporter for ``features="pooled"``.
 
@@ -32,11 +32,11 @@ from typing import Any
 import numpy as np
 from sklearn.utils.validation import check_is_fitted
 
-from slipkit.baselines.tactip import MIN_REFERENCE_MM, PinMotionDetector
 from slipkit.export._graph import DOUBLE, FLOAT, GraphBuilder
 from slipkit.export.detectors import DetectorGraph, _finish, _graph, _prologue
 from slipkit.export.registry import DEFAULT_OPSET, ExportError, register_exporter
-from slipkit.features.tactip import POOLED_NAMES
+from slipkit.families.tactip.detector import MIN_REFERENCE_MM, PinMotionDetector
+from slipkit.features.pins import POOLED_NAMES
 
 
 def _reduce(g: GraphBuilder, op: str, x: str, axes: list[int], keepdims: int) -> str:
@@ -190,7 +190,7 @@ def export_pin_motion(
 
 
 def pooled_feature_nodes(g: GraphBuilder, feats: str, n_pins: int) -> str:
-    """Append :func:`slipkit.features.tactip.pooled_features` of ``(batch, 2N)`` float32
+    """Append :func:`slipkit.features.pins.pooled_features` of ``(batch, 2N)`` float32
     ``dr_dtheta`` features; returns the float32 ``(batch, 6)`` output."""
     n = int(n_pins)
     f = g.op("Reshape", g.op("Cast", feats, to=DOUBLE), g.const([-1, 2, n], np.int64))

@@ -9,7 +9,7 @@ trigger the response). Success = the object caught (two plateaus in its height).
 Here the plant is :class:`~slipkit.closedloop.plant.GraspPlant` (Hertz contact, the
 scene's mass, friction and stiffness), stepped at the camera rate; the trial's
 parameters are drawn by the scene model itself
-(:meth:`slipkit.sim.scenes.tactip.TacTipGravityDrop.sample` and ``trial``), with the
+(:meth:`slipkit.families.tactip.scene.TacTipGravityDrop.sample` and ``trial``), with the
 retraction speed set from the scenario's grid. Every frame's pins come from the
 plant's *current* state through the scene's listed effects (:class:`TacTipSensor`).
 """
@@ -42,7 +42,8 @@ from slipkit.closedloop.plant import (
 from slipkit.closedloop.run import Outcome, speed_grid
 from slipkit.closedloop.scenarios import plant_params, register_scenario
 from slipkit.errors import SlipkitError
-from slipkit.physics.tactip import normal_force_N
+from slipkit.families.tactip.physics import normal_force_N
+from slipkit.families.tactip.scene import TacTipGravityDrop, TacTipTrial
 from slipkit.sim.core import (
     EFFECTS,
     Scene,
@@ -50,7 +51,6 @@ from slipkit.sim.core import (
     draw_effect_params,
     effect_name,
 )
-from slipkit.sim.scenes.tactip import TacTipGravityDrop, TacTipTrial
 
 #: Effects that move the skin as a function of the contact state (grip, load ratio,
 #: time since onset): evaluated per frame on a one-frame state, held at the arrest.
@@ -100,7 +100,7 @@ class TacTipSensor:
     Reused from the simulator: the scene model's rest layout and radial spreading
     (the first lines of :meth:`TacTipGravityDrop.base`, repeated in :meth:`base`
     because ``base`` builds a whole trial), and every listed effect function itself
-    (``slipkit.sim.effects.tactip``), called on a one-frame :class:`SceneState`
+    (``slipkit.families.tactip.effects``), called on a one-frame :class:`SceneState`
     whose trial is the plant's state (:class:`_TrialAt`). Per-trial draws of effect
     parameters use :func:`slipkit.sim.core.draw_effect_params`, as ``Scene.run_trial``
     does. One effect has memory across frames, ``slip_sliding`` (an AR(1) process);

@@ -3,7 +3,7 @@ sliding, pin detection jitter and missing pins (James, Pestell, Lepora 2018, RA-
 
 Every effect acts on the ``pins`` signal, shape (T, N, 2) in mm, aligned with
 ``time["pins"]``; the contact physics is evaluated at those times from the trial's
-:class:`~slipkit.sim.scenes.tactip.TacTipTrial` (``truth["tactip"]``).
+:class:`~slipkit.families.tactip.scene.TacTipTrial` (``truth["tactip"]``).
 """
 
 from __future__ import annotations
@@ -13,10 +13,10 @@ from typing import Any
 import numpy as np
 from scipy.signal import lfilter
 
-from slipkit.physics.tactip import contact_semi_axes, mindlin_stretch
+from slipkit.families.tactip.physics import contact_semi_axes, mindlin_stretch
+from slipkit.families.tactip.scene import TacTipTrial
 from slipkit.sim.core import SceneState, SimulationError, register_effect
 from slipkit.sim.effects.common import white_noise
-from slipkit.sim.scenes.tactip import TacTipTrial
 
 
 def _trial(state: SceneState, effect: str) -> TacTipTrial:
