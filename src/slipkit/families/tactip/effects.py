@@ -8,18 +8,24 @@ Every effect acts on the ``pins`` signal, shape (T, N, 2) in mm, aligned with
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy.signal import lfilter
 
 from slipkit.families.tactip.physics import contact_semi_axes, mindlin_stretch
-from slipkit.families.tactip.scene import TacTipTrial
 from slipkit.sim.core import SceneState, SimulationError, register_effect
 from slipkit.sim.effects.common import white_noise
 
+if TYPE_CHECKING:
+    from slipkit.families.tactip.scene import TacTipTrial
+
 
 def _trial(state: SceneState, effect: str) -> TacTipTrial:
+    # imported here: the scene module imports slipkit.sim, whose import registers these
+    # effects (slipkit.families.PLUGIN_MODULES), so a module-level import would be circular
+    from slipkit.families.tactip.scene import TacTipTrial
+
     trial = state.truth.get("tactip")
     if not isinstance(trial, TacTipTrial):
         raise SimulationError(

@@ -44,7 +44,7 @@ def small(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, pd.DataFrame]
             "~closedloop.detectors.svm_linear_k2",
             "~closedloop.runs.svm_linear",
             "~closedloop.detectors.svm_tuned_k2",
-            "~closedloop.detectors.alignment_k1",  # test_tactip_alignment.py runs it
+            "~closedloop.detectors.alignment_k1",  # test_closedloop_alignment.py runs it
             "~closedloop.runs.alignment",
             "~closedloop.detectors.alignment_fast_k1",
             "~closedloop.runs.alignment_fast",

@@ -20,7 +20,7 @@ from slipkit.features.pins import pooled_features, velocity_features
 from slipkit.models import TacTipSVM
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "baselines"))
-from test_tactip_detector import stretch_then_snap
+from tests.families.tactip.test_detector import stretch_then_snap
 
 
 def recordings(
