@@ -40,6 +40,35 @@ def test_no_issue_numbers_in_the_product():
     assert not hits, "\n".join(hits)
 
 
+#: what a newcomer reads: README.md, ARCHITECTURE.md and docs/ (words as ``wc -w`` counts them)
+WORD_BUDGET = 40_000
+
+
+def _words(path: Path) -> int:
+    return len(path.read_text(encoding="utf-8").split())
+
+
+def test_docs_fit_the_word_budget():
+    """README + ARCHITECTURE.md + docs/ stay under the word budget a reader can carry."""
+    pages = [
+        ROOT / "README.md",
+        ROOT / "ARCHITECTURE.md",
+        *sorted((ROOT / "docs").rglob("*.md")),
+    ]
+    counts = {p.relative_to(ROOT).as_posix(): _words(p) for p in pages}
+    total = sum(counts.values())
+    largest = ", ".join(
+        f"{k} {v}" for k, v in sorted(counts.items(), key=lambda kv: -kv[1])[:5]
+    )
+    assert total < WORD_BUDGET, f"{total} words >= {WORD_BUDGET}; largest: {largest}"
+
+
+def test_word_count_counts_what_wc_does(tmp_path: Path):
+    page = tmp_path / "p.md"
+    page.write_text("# Title\n\none  two\tthree\n`code` | a |\n", encoding="utf-8")
+    assert 9 == _words(page)  # "#", "|" count, as in wc -w
+
+
 def test_the_pattern_catches_what_it_should():
     assert ISSUE.search("the issue-16 target")
     assert ISSUE.search("(issue 14)")
