@@ -75,6 +75,10 @@ _SLIPTACK_EXPORTERS = tuple(
 )
 _FSR = "slipkit.families.fsr."
 _FSR_EXPORTERS = (_FSR + "export.touch_slip", _FSR + "export.onset")
+_DV = "slipkit.families.davis."
+_DAVIS_EXPORTERS = tuple(
+    f"{_DV}export.{m}" for m in ("polarity", "onset", "classifier")
+)
 
 FAMILIES: dict[str, Family] = {
     f.name: f
@@ -154,18 +158,15 @@ FAMILIES: dict[str, Family] = {
         Family(
             name="davis",
             sensor="davis",
-            tasks=(_T + "davis:DavisRelease",),
-            deploys=(_T + "davis:DavisRelease",),
-            compares=(_T + "davis:DavisRelease",),
-            exporters=(
-                "slipkit.export.davis",
-                "slipkit.export.davis_onset",
-                "slipkit.export.events",
-            ),
+            tasks=(_DV + "task:DavisRelease",),
+            deploys=(_DV + "task:DavisRelease",),
+            compares=(_DV + "task:DavisRelease",),
+            exporters=_DAVIS_EXPORTERS,
             scenes=("davis_release", "davis_release_hard"),
             comparisons=("davis",),
             scenario="davis",
             docs=("simulation/davis.md", "baselines/davis.md"),
+            detectors=(_DV + "polarity", _DV + "onset"),
         ),
         Family(
             name="gelsight",
@@ -204,6 +205,16 @@ PLUGIN_MODULES: dict[str, tuple[str, ...]] = {
     "effects": (_ST + "effects", _FSR + "effects"),
     "tasks": (_ST + "task",),
 }
+# DAVIS's folder
+for _kind, _modules in (
+    ("exporters", _DAVIS_EXPORTERS),
+    ("deployers", (_DV + "deploy",)),
+    ("adapters", (_DV + "adapter",)),
+    ("scenarios", (_DV + "scenario",)),
+    ("effects", (_DV + "effects",)),
+    ("tasks", (_DV + "task",)),
+):
+    PLUGIN_MODULES[_kind] = (*PLUGIN_MODULES.get(_kind, ()), *_modules)
 
 
 def resolve(ref: str) -> Any:
