@@ -541,7 +541,7 @@ def main() -> None:
             model = SpeedSlipDetector(speed=model["*"], threshold=0.0).fit()
         # the graph's estimator: event frames in
         if type(model).__name__ == "DavisOnset":
-            from slipkit.export.davis_onset import DavisOnsetScores
+            from slipkit.families.davis.export.onset import DavisOnsetScores
 
             model = DavisOnsetScores(detector=model).fit()
         svm = name.startswith("tactip_svm")

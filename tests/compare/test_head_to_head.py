@@ -12,8 +12,8 @@ from hydra import compose, initialize_config_dir
 from slipkit import config_dir
 from slipkit.baselines.window_energy import ElectrodeEnergyClassifier
 from slipkit.compare.commands import compare_main
+from slipkit.families.davis.classifier import EventFrameClassifier
 from slipkit.families.sliptack.spectral import SpectralSpeedRegressor
-from slipkit.models.events import EventFrameClassifier
 
 
 def _run(tmp_path: Path, family: str, overrides: list[str]) -> pd.DataFrame:

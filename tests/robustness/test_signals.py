@@ -13,8 +13,8 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from slipkit.baselines.biotac import ForceDerivative, PressureVibration
-from slipkit.baselines.davis import DavisPolarity
 from slipkit.errors import SlipkitError
+from slipkit.families.davis.polarity import DavisPolarity
 from slipkit.families.fsr.touch_slip import FSRTouchSlip
 from slipkit.families.sliptack.accel import DropAcceleration
 from slipkit.families.sliptack.speed import (

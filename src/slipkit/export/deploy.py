@@ -61,16 +61,6 @@ Family folders' deployers document their own tasks (e.g. TacTip's frame task in
     sign latched at its first press. Slip class ``1`` (the detector's positive
     class); parity is the detectors' own check on the held-out recordings (through
     that step).
-``DavisRelease``
-    Frame = one 10 ms event frame ``[2, H, W]`` (positive and negative counts per
-    pixel), window 1, hop 1. One preprocessing step, ``davis_areas`` (the detector's
-    opening, closing and connected-component area filter in numpy: ONNX has no op
-    for connected components), then a two-row graph for the polarity rule
-    (``export/davis.py``); parity: the op's areas equal the detector's on every
-    held-out frame. The learned ``EventFrameClassifier``: one ``frame_s`` (20 ms)
-    event frame, no preprocessing, the counts, areas, scaler and logistic regression
-    in the graph (``export/events.py``); parity: the frames' features equal the
-    classifier's on every held-out frame, then the graph's logit the classifier's.
 """
 
 from __future__ import annotations
@@ -804,12 +794,10 @@ def _register_builtin() -> None:
 _register_builtin()
 
 __all__ = [
-    "DAVIS_REPLAY_BYTES",
     "NO_SLIP_CLASSES",
     "Deployment",
     "HeldOutTrial",
     "choose_slip_classes",
-    "davis_event_frames",
     "decision_ends",
     "deployer_for",
     "deployment",
@@ -819,7 +807,3 @@ __all__ = [
     "slip_decisions",
     "trial_classes",
 ]
-
-# The DAVIS deployer lives in its own module; importing it registers it (and keeps
-# davis_event_frames importable from here).
-from slipkit.export.deploy_davis import DAVIS_REPLAY_BYTES, davis_event_frames  # noqa: E402

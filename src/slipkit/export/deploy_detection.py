@@ -1,6 +1,8 @@
 """The stream-detection task's deployer: one raw sample per frame, the detector's window
-graph, and for a voltage-input FSR detector the ``press_sign`` step (registered with
-:mod:`slipkit.export.deploy`)."""
+graph, and the runtime steps its exporter registers (:func:`slipkit.export.registry.runtime_steps`,
+e.g. a voltage-input detector's ``press_sign``); registered with :mod:`slipkit.export.deploy`.
+It names no sensor family: the replay's groups come from the effects that declare them
+(``replay_groups`` of :func:`slipkit.sim.core.register_effect`)."""
 
 from __future__ import annotations
 
@@ -84,10 +86,6 @@ def _deploy_detection(
     )
 
 
-#: A trials column naming the FSR wiring (the fsr_polarity effect); the replay covers each.
-WIRING_COLUMN = "fsr_polarity.polarity"
-
-
 def _detection_classes(
     dataset: Dataset,
     trials: Sequence[HeldOutTrial],
@@ -95,10 +93,14 @@ def _detection_classes(
     group_by: str | None,
 ) -> list[HeldOutTrial]:
     """Held-out recordings with a class (``slip``: a finite ``onset`` label, else
-    ``no_slip``; None without the label) and a group (the FSR wiring when the trials
-    record it, else ``group_by``), so that the replay samples each."""
+    ``no_slip``; None without the label) and a group (the first column the trials
+    record of an effect's ``replay_groups``, such as a sensor's wiring, else
+    ``group_by``), so that the replay samples each."""
+    # importing slipkit.sim registers every effect, family folders' included
+    from slipkit.sim.core import replay_groups
+
     columns = dataset.trials.columns
-    group = WIRING_COLUMN if WIRING_COLUMN in columns else group_by
+    group = next((c for c in replay_groups() if c in columns), group_by)
     out = trial_classes(dataset, trials, None, group)
     if onset is None or onset not in columns:
         return out

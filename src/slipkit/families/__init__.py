@@ -10,7 +10,7 @@ scene and scenario resolves, each config and doc page exists.
 
 The records hold strings only, resolved on demand (:func:`resolve`), so this module imports
 nothing of the stages and any stage may read it. A family packaged as one folder lives in
-``slipkit/families/<name>/`` (``gelsight``, ``sliptack``, ``fsr``, ``tactip``); :data:`PLUGIN_MODULES` names the
+``slipkit/families/<name>/`` (``gelsight``, ``sliptack``, ``fsr``, ``tactip``, ``davis``); :data:`PLUGIN_MODULES` names the
 modules of such folders that register plug-ins when imported, by kind, and the stage owning a
 kind imports them by name (:func:`load_plugins`), never statically.
 """
@@ -77,6 +77,10 @@ _FSR = "slipkit.families.fsr."
 _FSR_EXPORTERS = (_FSR + "export.touch_slip", _FSR + "export.onset")
 _TT = "slipkit.families.tactip."
 _TACTIP_EXPORTERS = (_TT + "export.svm", _TT + "export.detector")
+_DV = "slipkit.families.davis."
+_DAVIS_EXPORTERS = tuple(
+    f"{_DV}export.{m}" for m in ("polarity", "onset", "classifier")
+)
 
 FAMILIES: dict[str, Family] = {
     f.name: f
@@ -153,18 +157,15 @@ FAMILIES: dict[str, Family] = {
         Family(
             name="davis",
             sensor="davis",
-            tasks=(_T + "davis:DavisRelease",),
-            deploys=(_T + "davis:DavisRelease",),
-            compares=(_T + "davis:DavisRelease",),
-            exporters=(
-                "slipkit.export.davis",
-                "slipkit.export.davis_onset",
-                "slipkit.export.events",
-            ),
+            tasks=(_DV + "task:DavisRelease",),
+            deploys=(_DV + "task:DavisRelease",),
+            compares=(_DV + "task:DavisRelease",),
+            exporters=_DAVIS_EXPORTERS,
             scenes=("davis_release", "davis_release_hard"),
             comparisons=("davis",),
             scenario="davis",
             docs=("simulation/davis.md", "baselines/davis.md"),
+            detectors=(_DV + "polarity", _DV + "onset"),
         ),
         Family(
             name="gelsight",
@@ -197,12 +198,18 @@ PLUGIN_MODULES: dict[str, tuple[str, ...]] = {
         *_SLIPTACK_EXPORTERS,
         *_FSR_EXPORTERS,
         *_TACTIP_EXPORTERS,
+        *_DAVIS_EXPORTERS,
     ),
-    "deployers": (_ST + "deploy", _TT + "deploy"),
-    "adapters": (_ST + "adapter", _TT + "adapter"),
-    "scenarios": (_ST + "scenario", _FSR + "scenario", _TT + "scenario"),
-    "effects": (_ST + "effects", _FSR + "effects", _TT + "effects"),
-    "tasks": (_ST + "task",),
+    "deployers": (_ST + "deploy", _TT + "deploy", _DV + "deploy"),
+    "adapters": (_ST + "adapter", _TT + "adapter", _DV + "adapter"),
+    "scenarios": (
+        _ST + "scenario",
+        _FSR + "scenario",
+        _TT + "scenario",
+        _DV + "scenario",
+    ),
+    "effects": (_ST + "effects", _FSR + "effects", _TT + "effects", _DV + "effects"),
+    "tasks": (_ST + "task", _DV + "task"),
 }
 
 

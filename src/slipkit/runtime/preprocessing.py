@@ -45,7 +45,7 @@ op                           parameters, effect
                              ``(1, 2, H, W)`` (positive, negative event counts)
                              -> the filtered positive and negative areas
                              ``(1, 2)`` (px) of
-                             :func:`slipkit.baselines.davis.clean_frame`
+                             :func:`slipkit.families.davis.polarity.clean_frame`
                              (opening, closing, 8-connected area filter)
 ``press_sign``               ``rest_frames``, ``block``, ``hop`` (int >= 1, hop a
                              multiple of block), ``delta`` (> 0), ``sign``
@@ -447,7 +447,7 @@ class Pipeline:
 
 
 # -- DAVIS event frames: opening, closing, area filter, areas --------------------------------
-# The DAVIS detector (slipkit.baselines.davis.clean_frame) uses scipy.ndimage for the
+# The DAVIS detector (slipkit.families.davis.polarity.clean_frame) uses scipy.ndimage for the
 # morphology and the connected-component labelling. scipy is not installed on the
 # gripper PC (the runtime imports only numpy and onnxruntime) and ONNX has no
 # connected-component op, so they are written here by hand in vectorised numpy; the
@@ -551,7 +551,7 @@ def clean_event_frame(
     closing_px: int,
     min_area_px: int,
 ) -> NDArray[np.bool_]:
-    """:func:`slipkit.baselines.davis.clean_frame` in numpy: opening, closing, area filter."""
+    """:func:`slipkit.families.davis.polarity.clean_frame` in numpy: opening, closing, area filter."""
     img = np.asarray(img, dtype=bool)
     if not img.any():
         return img

@@ -98,11 +98,17 @@ EFFECTS: Registry[str, Effect] = Registry(
 Draw = Literal["uniform", "log", "choice"]
 #: effect name -> {parameter: how a ``[lo, hi]`` (or list) value is drawn per trial}
 EFFECT_DRAWS: dict[str, dict[str, Draw]] = {}
+#: effect name -> its drawn parameters whose value changes what a deployed bundle meets
+#: (e.g. a sensor's wiring): a deployment's replay covers each value (:func:`replay_groups`)
+EFFECT_REPLAY_GROUPS: dict[str, tuple[str, ...]] = {}
 _DRAW_KINDS = ("uniform", "log", "choice")
 
 
 def register_effect(
-    name: str, *, draws: Mapping[str, Draw] | None = None
+    name: str,
+    *,
+    draws: Mapping[str, Draw] | None = None,
+    replay_groups: Sequence[str] = (),
 ) -> Callable[[Effect], Effect]:
     """Decorator: register an effect under ``name`` (refuses duplicates).
 
@@ -114,6 +120,10 @@ def register_effect(
         Parameters that a scene may give as ``[lo, hi]`` (or, for ``choice``, a list of
         options) to draw them once per trial: uniform, log-uniform (``lo > 0``) or one
         option with equal probability (see :func:`draw_effect_params`).
+    replay_groups : sequence of str, optional
+        Drawn parameters (``choice``) whose value changes what a deployed bundle meets,
+        such as a sensor's wiring: a bundle's replay holds held-out trials of each
+        value drawn (:func:`replay_groups`).
     """
     spec = dict(draws or {})
     bad = {p: k for p, k in spec.items() if k not in _DRAW_KINDS}
@@ -121,13 +131,29 @@ def register_effect(
         raise ValueError(
             f"effect {name!r}: unknown draw kinds {bad}; use {_DRAW_KINDS}"
         )
+    groups = tuple(replay_groups)
+    not_choice = [p for p in groups if spec.get(p) != "choice"]
+    if not_choice:
+        raise ValueError(
+            f"effect {name!r}: replay_groups {not_choice} are not drawn as 'choice'"
+        )
 
     def deco(fn: Effect) -> Effect:
         EFFECTS.register(name, fn)
         EFFECT_DRAWS[name] = spec
+        if groups:
+            EFFECT_REPLAY_GROUPS[name] = groups
         return fn
 
     return deco
+
+
+def replay_groups() -> tuple[str, ...]:
+    """The trials-table columns (``<effect>.<parameter>``, as :func:`draw_effect_params`
+    records a drawn value) of every effect's ``replay_groups``, in registration order."""
+    return tuple(
+        f"{e}.{p}" for e, params in EFFECT_REPLAY_GROUPS.items() for p in params
+    )
 
 
 def _is_list(value: Any) -> bool:

@@ -152,10 +152,9 @@ def register_analytic_estimator(cls: type) -> type:
 
 def analytic_estimators() -> tuple[type, ...]:
     """The analytic estimators a learned-model task refuses (they read a stream inside
-    their own task): stream detectors, the DAVIS polarity rule and what family folders
-    register with :func:`register_analytic_estimator`."""
+    their own task): stream detectors and what family folders register with
+    :func:`register_analytic_estimator`."""
     from slipkit.baselines.base import StreamDetector
-    from slipkit.baselines.davis import DavisPolarity
 
     _families.load_plugins("tasks")
-    return (StreamDetector, DavisPolarity, *_ANALYTIC)
+    return (StreamDetector, *_ANALYTIC)

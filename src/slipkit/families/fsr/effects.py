@@ -231,7 +231,9 @@ def fsr_disturbance(
 POLARITIES = ("falling", "rising")
 
 
-@register_effect("fsr_polarity", draws={"polarity": "choice"})
+@register_effect(
+    "fsr_polarity", draws={"polarity": "choice"}, replay_groups=("polarity",)
+)
 def fsr_polarity(
     state: SceneState, rng: np.random.Generator, *, polarity: str = "falling"
 ) -> SceneState:

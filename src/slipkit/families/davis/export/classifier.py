@@ -1,11 +1,11 @@
 """Exporter of the learned DAVIS event-frame classifier.
 
-:class:`~slipkit.models.events.EventFrameClassifier` reads, per ``frame_s`` frame of
+:class:`~slipkit.families.davis.classifier.EventFrameClassifier` reads, per ``frame_s`` frame of
 events, the positive and negative event counts and areas (distinct pixels that fired)
-and feeds six numbers of them (:func:`~slipkit.models.events.event_features`) to a
+and feeds six numbers of them (:func:`~slipkit.families.davis.classifier.event_features`) to a
 ``StandardScaler`` -> ``LogisticRegression`` pipeline. The runtime receives each frame
 as counts per pixel, shape ``(2, height_px, width_px)`` (positive, negative; the DAVIS
-deployer's :func:`~slipkit.export.deploy.davis_event_frames`), so the whole estimator
+deployer's :func:`~slipkit.families.davis.deploy.davis_event_frames`), so the whole estimator
 fits in one graph:
 
 1. **features** (ONNX ops): the counts are a ``ReduceSum`` of the frame and the areas a
@@ -49,7 +49,11 @@ from slipkit.export.registry import (
     producers,
     register_exporter,
 )
-from slipkit.models.events import FEATURES, EventFrameClassifier, event_features
+from slipkit.families.davis.classifier import (
+    FEATURES,
+    EventFrameClassifier,
+    event_features,
+)
 
 #: Graph input: one event frame as counts per pixel (positive, negative).
 INPUT = "event_frame"
@@ -102,7 +106,7 @@ class EventFrameScores(ClassifierMixin, BaseEstimator):
         return self
 
     def features(self, frames: ArrayLike) -> NDArray[np.float64]:
-        """:data:`~slipkit.models.events.FEATURES` of event frames ``(n, 2, H, W)``."""
+        """:data:`~slipkit.families.davis.classifier.FEATURES` of event frames ``(n, 2, H, W)``."""
         counts, areas = frame_counts(frames)
         return event_features(counts, areas)
 

@@ -10,7 +10,7 @@ slip facilitates the system to prevent slip by modifying the gripping force."
 
 Here each trial: the scene model draws the object (contact-patch shape, centre,
 orientation, the side that loses contact first) and the press and hold times
-(:meth:`slipkit.sim.scenes.davis.DavisRelease.sample`); the hand presses the object
+(:meth:`slipkit.families.davis.scene.DavisRelease.sample`); the hand presses the object
 against the silicone (the grip ramps to ``F_hold``, the patch grows as ``F^(1/3)``, the
 scene's press law), holds it, and lifts: the tangential load rises to the weight
 ``m g`` over the condition's time (a raised cosine). The grasp is light (its static
@@ -33,7 +33,7 @@ by their own functions: ``contact_events`` on the pixels the plant's patch cover
 uncovers (crossing times interpolated between the plant's 1 ms steps, the truth
 camera's rate), ``vibration_incidents`` and ``background_events`` on the trial's
 timeline (the scene draws vibration only while pressing and holding); frames are
-built by the deployer's :func:`slipkit.export.deploy.davis_event_frames`.
+built by the deployer's :func:`slipkit.families.davis.deploy.davis_event_frames`.
 
 Outcome: ``onset_s`` the incipient-slip onset; a declaration before it is a false
 alarm; ``slip_mm`` the gross slide (0 when the grip rose before the object slid);
@@ -59,8 +59,9 @@ from slipkit.closedloop.plant import G_M_S2, Actuator, PinchPlant, PlantState
 from slipkit.closedloop.run import Outcome, speed_grid
 from slipkit.closedloop.scenarios import _draw, _span, plant_params, register_scenario
 from slipkit.errors import SlipkitError
+from slipkit.families.davis.physics import ContactPatch
+from slipkit.families.davis.scene import DavisRelease
 from slipkit.sim.core import EFFECTS, Scene, SceneState, draw_effect_params, effect_name
-from slipkit.sim.scenes.davis import ContactPatch, DavisRelease
 
 #: Effects driven by the plant's contact patch, evaluated on each frame's crossings.
 PLANT_EFFECTS = frozenset({"contact_events"})
@@ -408,10 +409,10 @@ class DavisSensor:
     ) -> np.ndarray:
         """The event frame ending at ``state.t``: counts per pixel, ``(2, height, width)``.
 
-        Built by the deployer's :func:`~slipkit.export.deploy.davis_event_frames` (the
+        Built by the deployer's :func:`~slipkit.families.davis.deploy.davis_event_frames` (the
         frames the bundle was checked on): channel 0 positive, 1 negative.
         """
-        from slipkit.export.deploy import davis_event_frames
+        from slipkit.families.davis.deploy import davis_event_frames
 
         del channels  # checked once per trial (check_frame)
         t1 = float(state.t)

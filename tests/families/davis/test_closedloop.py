@@ -14,18 +14,18 @@ from omegaconf import OmegaConf
 
 from slipkit import config_dir
 from slipkit.closedloop.commands import closedloop_main, load_scenario, scenario_of
-from slipkit.closedloop.davis import (
+from slipkit.closedloop.detectors import Detector, NoDetector, OracleDetector
+from slipkit.closedloop.plant import PlantState
+from slipkit.closedloop.scenarios import get_scenario
+from slipkit.errors import SlipkitError
+from slipkit.families.davis.scenario import (
     ContactModel,
     cut_for_fraction,
     frame_channels,
     kept_fraction,
 )
-from slipkit.closedloop.detectors import Detector, NoDetector, OracleDetector
-from slipkit.closedloop.plant import PlantState
-from slipkit.closedloop.scenarios import get_scenario
-from slipkit.errors import SlipkitError
+from slipkit.families.davis.scene import DavisRelease
 from slipkit.sim.commands import build_scene
-from slipkit.sim.scenes.davis import DavisRelease
 
 #: the slow lift (s) and the fast one
 SLOW, FAST = 0.5, 0.05

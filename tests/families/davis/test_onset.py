@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from slipkit.baselines.davis import DavisPolarity
-from slipkit.baselines.davis_onset import DavisOnset, onset_features, onset_score
+from slipkit.families.davis.onset import DavisOnset, onset_features, onset_score
+from slipkit.families.davis.polarity import DavisPolarity
 
 W, H = 60, 50
 

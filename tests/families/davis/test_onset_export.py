@@ -11,10 +11,10 @@ from hydra.core.global_hydra import GlobalHydra
 from omegaconf import DictConfig
 
 from slipkit import config_dir
-from slipkit.baselines.davis_onset import DavisOnset
 from slipkit.export import export
-from slipkit.export.davis_onset import DavisOnsetScores
 from slipkit.export.parity import run_graph
+from slipkit.families.davis.export.onset import DavisOnsetScores
+from slipkit.families.davis.onset import DavisOnset
 
 
 def _compose(name: str, overrides: list[str]) -> DictConfig:

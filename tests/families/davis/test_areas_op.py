@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from slipkit.baselines.davis import EIGHT, clean_frame
+from slipkit.families.davis.polarity import EIGHT, clean_frame
 from slipkit.runtime.errors import BundleError
 from slipkit.runtime.preprocessing import (
     Pipeline,

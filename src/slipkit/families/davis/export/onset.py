@@ -1,4 +1,4 @@
-"""Exporter and deployment of the DAVIS onset rule (:mod:`slipkit.baselines.davis_onset`).
+"""Exporter of the DAVIS onset rule (:mod:`slipkit.families.davis.onset`).
 
 The whole rule fits in one graph on the runtime's event frame (counts per pixel,
 ``(batch, 2, H, W)``, positive then negative), no preprocessing op:
@@ -11,17 +11,15 @@ The whole rule fits in one graph on the runtime's event frame (counts per pixel,
 2. in float64, on those ``(batch, 2, H, 3)`` row sums only: ``MatMul`` with
    ``[1, y, y^2]`` gives every area and first and second moment, then the positive
    pixels' covariance and its ``curl`` in the order of ``onset_features``;
-3. the score :func:`~slipkit.baselines.davis_onset.onset_score`: > 0 is slip.
+3. the score :func:`~slipkit.families.davis.onset.onset_score`: > 0 is slip.
 
 :class:`DavisOnsetScores` is the estimator side of the parity check (the detector's
 numpy features and score on runtime frames); the deployer checks those features equal
-the detector's own (``DavisOnset.frames`` on the events) on every held-out frame.
+the detector's own (``DavisOnset.frames`` on the events) on every held-out frame
+(:func:`slipkit.families.davis.deploy.deploy_davis_onset`).
 """
 
 from __future__ import annotations
-
-from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -29,7 +27,6 @@ from onnx import helper
 from sklearn.base import BaseEstimator, ClassifierMixin
 from sklearn.utils.validation import check_is_fitted
 
-from slipkit.baselines.davis_onset import NEIGHBOURS, DavisOnset
 from slipkit.export._graph import DOUBLE, FLOAT, GraphBuilder
 from slipkit.export.registry import (
     DEFAULT_OPSET,
@@ -37,6 +34,7 @@ from slipkit.export.registry import (
     producers,
     register_exporter,
 )
+from slipkit.families.davis.onset import NEIGHBOURS, DavisOnset
 
 INPUT = "event_frame"
 SCORE = "score"
@@ -190,40 +188,4 @@ def export_davis_onset(
 register_exporter(DavisOnsetScores, export_davis_onset)
 
 
-def deploy_davis_onset(
-    task: Any, run: Any, dataset: Any, options: Mapping[str, Any]
-) -> Any:
-    """A :class:`DavisOnset` run's deployment: event frames in, the whole rule in the graph.
-
-    Frame = one ``frame_s`` event frame as counts per pixel, ``(2, height_px,
-    width_px)``, window 1, hop 1, at ``1 / frame_s`` Hz, no preprocessing. Before
-    anything is written, the features of every held-out frame are checked equal to the
-    detector's own (``DavisOnset.frames`` on the events). Slip class ``"1"`` (score
-    > 0); debounce :func:`~slipkit.export.deploy_davis.davis_debounce` (the run's
-    chosen one).
-    """
-    from slipkit.export.deploy_davis import event_frame_deployment
-
-    det = run.model
-    cols = ["pos_area_px", "neg_area_px", "curl"]
-    return event_frame_deployment(
-        task,
-        run,
-        dataset,
-        options,
-        scores=DavisOnsetScores(detector=det).fit(),
-        shape=(float(det.frame_s), int(det.height_px), int(det.width_px)),
-        own_features=lambda ev: det.frames(ev)[cols].to_numpy(np.float64),
-        source="DavisOnset.frames",
-        atol=1e-9,
-        notes=[
-            f"the graph keeps fired pixels with >= {det.min_neighbours} fired "
-            "8-neighbours (Conv), sums their areas and the positive pixels' covariance",
-            f"decision: slip when positive area >= {det.min_pos_px} px, negative <= "
-            f"{det.neg_ratio:g} x positive and the positive pixels' curl < "
-            f"{det.max_curl:g} (a straight one-sided loss of contact)",
-        ],
-    )
-
-
-__all__ = ["DavisOnsetScores", "deploy_davis_onset", "export_davis_onset"]
+__all__ = ["DavisOnsetScores", "export_davis_onset"]

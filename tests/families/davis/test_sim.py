@@ -15,14 +15,14 @@ from slipkit import config_dir
 from slipkit.cli import main as cli_main
 from slipkit.data import load_dataset
 from slipkit.data.dataset import Trial
-from slipkit.sim.commands import build_scene
-from slipkit.sim.core import Scene, SimulationError
-from slipkit.sim.scenes.davis import (
+from slipkit.families.davis.physics import (
     ContactPatch,
-    DavisRelease,
     area_curve,
     incipient_slip_onset,
 )
+from slipkit.families.davis.scene import DavisRelease
+from slipkit.sim.commands import build_scene
+from slipkit.sim.core import Scene, SimulationError
 
 SCENE = "davis_release"
 CONTACT = {

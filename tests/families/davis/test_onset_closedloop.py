@@ -13,11 +13,11 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 from slipkit import config_dir
-from slipkit.baselines.davis_onset import DavisOnset
 from slipkit.closedloop.commands import load_scenario, scenario_of
-from slipkit.closedloop.davis import frame_channels
 from slipkit.closedloop.detectors import Detector
 from slipkit.closedloop.plant import PlantState
+from slipkit.families.davis.onset import DavisOnset
+from slipkit.families.davis.scenario import frame_channels
 from slipkit.sim.commands import build_scene
 
 

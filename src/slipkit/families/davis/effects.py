@@ -13,8 +13,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from slipkit.families.davis.physics import ContactPatch
 from slipkit.sim.core import SceneState, SimulationError, register_effect
-from slipkit.sim.scenes.davis import ContactPatch
 
 
 def _patch(state: SceneState, effect: str) -> ContactPatch:

@@ -12,11 +12,11 @@ from hydra.core.global_hydra import GlobalHydra
 from omegaconf import DictConfig
 
 from slipkit import config_dir
-from slipkit.baselines.davis import DavisPolarity, classify
 from slipkit.export import export
-from slipkit.export.davis import DavisAreaRule
-from slipkit.export.deploy import davis_event_frames
 from slipkit.export.parity import run_graph
+from slipkit.families.davis.deploy import davis_event_frames
+from slipkit.families.davis.export.polarity import DavisAreaRule
+from slipkit.families.davis.polarity import DavisPolarity, classify
 
 
 def _compose(name: str, overrides: list[str]) -> DictConfig:
@@ -77,8 +77,8 @@ def test_op_areas_equal_detector_on_simulated_frames() -> None:
 
 def test_train_export_replay_decides_as_the_detector(tmp_path: Path) -> None:
     """davis_release run -> slipkit export -> slipkit-run on replay.npz: the detector's slip frames."""
-    from slipkit.baselines.davis import clean_frame
     from slipkit.export.commands import export_main
+    from slipkit.families.davis.polarity import clean_frame
     from slipkit.runtime.cli import main
     from slipkit.train.commands import train_main
 

@@ -8,7 +8,7 @@ import pytest
 
 from slipkit.data.dataset import Trial
 from slipkit.errors import SlipkitError
-from slipkit.train.tasks.davis import DavisRelease
+from slipkit.families.davis.task import DavisRelease
 
 
 def _trials_and_frames(n: int = 4) -> tuple[list[Trial], pd.DataFrame]:

@@ -13,7 +13,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from slipkit import config_dir
-from slipkit.baselines.davis import (
+from slipkit.data import Dataset
+from slipkit.families.davis.polarity import (
     NONE,
     SLIP,
     VIBRATION,
@@ -24,7 +25,6 @@ from slipkit.baselines.davis import (
     contact_end,
     prf,
 )
-from slipkit.data import Dataset
 from slipkit.sim.commands import build_scene
 
 SHAPE = (180, 190)

@@ -1,6 +1,18 @@
-"""The DAVIS release task's deployers: event frames, the ``davis_areas`` runtime op
-for the polarity rule, the learned event-frame classifier (registered with
-:mod:`slipkit.export.deploy`)."""
+"""The DAVIS release task's deployers (registered with :mod:`slipkit.export.deploy`).
+
+``DavisRelease``
+    Frame = one 10 ms event frame ``[2, H, W]`` (positive and negative counts per
+    pixel), window 1, hop 1. One preprocessing step, ``davis_areas`` (the detector's
+    opening, closing and connected-component area filter in numpy: ONNX has no op
+    for connected components), then a two-row graph for the polarity rule
+    (:mod:`.export.polarity`); parity: the op's areas equal the detector's on every
+    held-out frame. The onset rule: one ``frame_s`` event frame, no preprocessing, the
+    whole rule in the graph (:mod:`.export.onset`). The learned
+    ``EventFrameClassifier``: one ``frame_s`` (20 ms) event frame, no preprocessing, the
+    counts, areas, scaler and logistic regression in the graph
+    (:mod:`.export.classifier`); parity: the frames' features equal the classifier's on
+    every held-out frame, then the graph's logit the classifier's.
+"""
 
 from __future__ import annotations
 
@@ -127,17 +139,16 @@ def _deploy_davis(
     ``1 / frame_s`` Hz. One preprocessing step, ``davis_areas`` (the detector's
     opening, closing and 8-connected area filter in numpy: ONNX has no connected
     components), gives the filtered areas; the graph is the polarity rule on them
-    (:class:`slipkit.export.davis.DavisAreaRule`). Before anything is written, the
+    (:class:`slipkit.families.davis.export.polarity.DavisAreaRule`). Before anything is written, the
     op's areas are checked to equal the detector's (``DavisPolarity.frames``) on
     every held-out frame. Slip class ``"1"``; debounce :func:`davis_debounce` (the
     run's chosen one).
     """
-    from slipkit.baselines.davis import DavisPolarity
-    from slipkit.baselines.davis_onset import DavisOnset
-    from slipkit.export.davis import DavisAreaRule
-    from slipkit.export.davis_onset import deploy_davis_onset
-    from slipkit.models.events import EventFrameClassifier
-    from slipkit.train.tasks.davis import DavisRelease
+    from slipkit.families.davis.classifier import EventFrameClassifier
+    from slipkit.families.davis.export.polarity import DavisAreaRule
+    from slipkit.families.davis.onset import DavisOnset
+    from slipkit.families.davis.polarity import DavisPolarity
+    from slipkit.families.davis.task import DavisRelease
 
     assert isinstance(task, DavisRelease)
     det = run.model
@@ -163,7 +174,7 @@ def deploy_area_rule(
 ) -> Deployment:
     """A rule on the filtered areas (``rule``: the graph's estimator on ``(pos, neg)``)
     behind the ``davis_areas`` op, the op checked against the run's detector."""
-    from slipkit.train.tasks.davis import DavisRelease
+    from slipkit.families.davis.task import DavisRelease
 
     assert isinstance(task, DavisRelease)
     det = run.model
@@ -292,15 +303,15 @@ def _deploy_davis_events(
 
     Frame = one ``frame_s`` (20 ms) event frame as counts per pixel, ``(2, height_px,
     width_px)``, window 1, hop 1, at ``1 / frame_s`` Hz, no preprocessing: the graph
-    (:mod:`slipkit.export.events`) computes the counts and areas and runs the scaler
+    (:mod:`slipkit.families.davis.export.classifier`) computes the counts and areas and runs the scaler
     and logistic regression. The model checked and exported is
-    :class:`slipkit.export.events.EventFrameScores` (the classifier scoring event
+    :class:`slipkit.families.davis.export.classifier.EventFrameScores` (the classifier scoring event
     frames); before anything is written, its features of every held-out frame are
     checked equal to the classifier's own (``frame_features`` on the events). Slip
     class ``"1"`` (logit >= 0); debounce :func:`davis_debounce` (the run's chosen one).
     """
-    from slipkit.export.events import EventFrameScores
-    from slipkit.train.tasks.davis import DavisRelease
+    from slipkit.families.davis.export.classifier import EventFrameScores
+    from slipkit.families.davis.task import DavisRelease
 
     assert isinstance(task, DavisRelease)
     clf = run.model
@@ -323,8 +334,44 @@ def _deploy_davis_events(
     )
 
 
+def deploy_davis_onset(
+    task: Task, run: Run, dataset: Dataset, options: Mapping[str, Any]
+) -> Deployment:
+    """A :class:`DavisOnset` run's deployment: event frames in, the whole rule in the graph.
+
+    Frame = one ``frame_s`` event frame as counts per pixel, ``(2, height_px,
+    width_px)``, window 1, hop 1, at ``1 / frame_s`` Hz, no preprocessing. Before
+    anything is written, the features of every held-out frame are checked equal to the
+    detector's own (``DavisOnset.frames`` on the events). Slip class ``"1"`` (score
+    > 0); debounce :func:`davis_debounce` (the run's
+    chosen one).
+    """
+    from slipkit.families.davis.export.onset import DavisOnsetScores
+
+    det = run.model
+    cols = ["pos_area_px", "neg_area_px", "curl"]
+    return event_frame_deployment(
+        task,
+        run,
+        dataset,
+        options,
+        scores=DavisOnsetScores(detector=det).fit(),
+        shape=(float(det.frame_s), int(det.height_px), int(det.width_px)),
+        own_features=lambda ev: det.frames(ev)[cols].to_numpy(np.float64),
+        source="DavisOnset.frames",
+        atol=1e-9,
+        notes=[
+            f"the graph keeps fired pixels with >= {det.min_neighbours} fired "
+            "8-neighbours (Conv), sums their areas and the positive pixels' covariance",
+            f"decision: slip when positive area >= {det.min_pos_px} px, negative <= "
+            f"{det.neg_ratio:g} x positive and the positive pixels' curl < "
+            f"{det.max_curl:g} (a straight one-sided loss of contact)",
+        ],
+    )
+
+
 def _register_davis() -> None:
-    from slipkit.train.tasks.davis import DavisRelease
+    from slipkit.families.davis.task import DavisRelease
 
     register_deployer(DavisRelease, _deploy_davis)
 

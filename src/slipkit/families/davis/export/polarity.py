@@ -8,7 +8,7 @@ slip when ``pos > 0`` and ``pos >= neg``.
 
 :class:`DavisAreaRule` is that rule as a scikit-learn classifier on ``(pos, neg)``
 rows, so the export parity check compares it with its graph; the deployer
-(:func:`slipkit.export.deploy_davis._deploy_davis`) checks the op's areas against the
+(:func:`slipkit.families.davis.deploy._deploy_davis`) checks the op's areas against the
 detector's own (``DavisPolarity.frames``) on the held-out trials.
 """
 
@@ -42,7 +42,7 @@ class DavisAreaRule(ClassifierMixin, BaseEstimator):
     Attributes
     ----------
     classes_ : ndarray
-        ``[0, 1]`` (1 = slip), as :class:`slipkit.baselines.davis.DavisPolarity`.
+        ``[0, 1]`` (1 = slip), as :class:`slipkit.families.davis.polarity.DavisPolarity`.
     n_features_in_ : int
         2.
     """

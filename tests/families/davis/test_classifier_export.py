@@ -15,10 +15,10 @@ from omegaconf import DictConfig
 
 from slipkit import config_dir
 from slipkit.export import export
-from slipkit.export.deploy import davis_event_frames
-from slipkit.export.events import EventFrameScores, frame_counts
 from slipkit.export.parity import check_parity, run_graph
-from slipkit.models.events import EventFrameClassifier
+from slipkit.families.davis.classifier import EventFrameClassifier
+from slipkit.families.davis.deploy import davis_event_frames
+from slipkit.families.davis.export.classifier import EventFrameScores, frame_counts
 
 
 def _compose(name: str, overrides: list[str]) -> DictConfig:
@@ -39,8 +39,8 @@ class Fitted(NamedTuple):
 @pytest.fixture(scope="module")
 def fitted() -> Fitted:
     """Four simulated hard releases (seed 0): two to fit, two held out."""
+    from slipkit.families.davis.task import DavisRelease
     from slipkit.sim.commands import build_scene
-    from slipkit.train.tasks.davis import DavisRelease
 
     ds = build_scene(_compose("simulate", ["scene=davis_release_hard"]).scene).simulate(
         4, seed=0
