@@ -2,7 +2,7 @@
 
 Run: ``.venv/bin/python benchmarks/bench_sliptack_frequency.py [--trials N] [--seed S]``.
 
-Three measurements, each printed as a table (quoted in ``docs/baselines/sliptack.md``):
+Three measurements, each printed as a table (quoted in ``docs/families/sliptack.md``):
 
 1. **frequency error on the sliptack_pull scene** (1 kHz, wood materials, which follow
    the exact model): per trial, the median over the sliding 1000-sample windows of the

@@ -6,7 +6,7 @@ The FSR signals here come from a small generator written for these tests, indepe
 a press, a hold, then either a slide made of stick-slip events (a sudden force drop of
 5-15 % with a short ring, then a linear stick ramp back) or sharp impulsive bumps (+-15-50 %
 of the holding force, 1-5 ms edges, 5-50 ms long, at least 0.4 s apart). Run this file
-as a script to print the detection table quoted in ``docs/baselines/fsr.md``::
+as a script to print the detection table quoted in ``docs/families/fsr.md``::
 
     .venv/bin/python tests/baselines/test_conventions.py
 """
@@ -356,7 +356,7 @@ def test_one_bump_is_one_event_two_events_confirm() -> None:
 
 
 def main() -> None:
-    """Print the slide / bump table quoted in docs/baselines/fsr.md."""
+    """Print the slide / bump table quoted in docs/families/fsr.md."""
     print(
         "FSR on generated signals (tests/baselines/test_conventions.py): 20 slides "
         "(seed 200), 20 bump trials (seed 500), alpha from the event ROC of 12 "

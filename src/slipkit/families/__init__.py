@@ -95,7 +95,7 @@ FAMILIES: dict[str, Family] = {
             scenes=("tactip_gravity_drop", "tactip_gravity_drop_hard"),
             comparisons=("tactip",),
             scenario="tactip",
-            docs=("simulation/tactip.md", "models/tactip.md"),
+            docs=("families/tactip.md",),
             detectors=(_TT + "detector",),
         ),
         Family(
@@ -138,7 +138,7 @@ FAMILIES: dict[str, Family] = {
             scenes=("fsr_probe_slide", "fsr_probe_slide_hard"),
             comparisons=("fsr",),
             scenario="fsr",
-            docs=("simulation/fsr.md", "baselines/fsr.md"),
+            docs=("families/fsr.md",),
             detectors=(_FSR + "touch_slip", _FSR + "onset"),
         ),
         Family(
@@ -151,7 +151,7 @@ FAMILIES: dict[str, Family] = {
             scenes=("sliptack_pull", "sliptack_pull_hard", "sliptack_drop"),
             comparisons=("sliptack", "sliptack_slip"),
             scenario="sliptack",
-            docs=("simulation/sliptack.md", "baselines/sliptack.md"),
+            docs=("families/sliptack.md",),
             detectors=tuple(_ST + m for m in ("speed", "accel", "onset", "torsion")),
         ),
         Family(
@@ -164,7 +164,7 @@ FAMILIES: dict[str, Family] = {
             scenes=("davis_release", "davis_release_hard"),
             comparisons=("davis",),
             scenario="davis",
-            docs=("simulation/davis.md", "baselines/davis.md"),
+            docs=("families/davis.md",),
             detectors=(_DV + "polarity", _DV + "onset"),
         ),
         Family(

@@ -81,7 +81,7 @@ def test_a_knock_never_scores(rise_s: float, dur_s: float, amp: float) -> None:
     """Knocks of either sign, 1-5 ms edges, 5-50 ms long, 5x a slip: no score at all.
 
     (A knock whose edges meet, a triangle, can pass at some sample phases:
-    docs/baselines/fsr.md, "Onset detectors".)"""
+    docs/families/fsr.md, "Onset detectors".)"""
     det = _fitted(threshold=0.05)
     s = det.decision_function(_knock(_held(), 700, amp, rise_s, dur_s)[:, None])
     assert 0 == int(np.isfinite(s).sum())

@@ -1,6 +1,6 @@
 """DAVIS event-polarity incipient slip detector (Rigi et al. 2018, Sensors 18(2):333).
 
-The paper's algorithm (Sec. 3, pseudo-code), ``docs/baselines/davis.md``:
+The paper's algorithm (Sec. 3, pseudo-code), ``docs/families/davis.md``:
 
 1. every ``frame_s`` = 10 ms, the events of that window become a positive and a negative
    binary frame (pixel set when it fired at least one event of that polarity);

@@ -9,7 +9,7 @@ release, plus the ground-truth contact area a 1000 FPS camera would see
 
 Events are effects (``slipkit.families.davis.effects``): contact-change events at the
 patch edge, vibration incidents, background noise. The backbone only stores, per
-pixel, when the edge covers and uncovers it. See ``docs/simulation/davis.md``.
+pixel, when the edge covers and uncovers it. See ``docs/families/davis.md``.
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ Each acts on the physical normal force ``signals["force"]`` (N, aligned with the
 through the inverse of the calibration eq. 6 (the difference ``V(F_new) - V(F_old)`` is
 added, so voltage-domain effects listed earlier are kept). List them before the
 voltage-domain effects (noise, quantisation). Source: Gentile et al. 2020; the scene is
-:class:`slipkit.families.fsr.scene.FSRProbeSlide`; documentation: ``docs/simulation/fsr.md``.
+:class:`slipkit.families.fsr.scene.FSRProbeSlide`; documentation: ``docs/families/fsr.md``.
 """
 
 from __future__ import annotations

@@ -47,7 +47,7 @@ on candidates, ``-inf`` elsewhere.
 
 Both choose a free threshold for early, correct decisions (``calibration="onset"``,
 :meth:`FSROnset.onset_units`). The shapes they assume, and where they fail, are in
-``docs/baselines/fsr.md`` ("Onset detectors").
+``docs/families/fsr.md`` ("Onset detectors").
 """
 
 from __future__ import annotations

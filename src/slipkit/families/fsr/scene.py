@@ -6,7 +6,7 @@ over the whole sensor surface in a set time (Table 1: 1.2-4.7 N, 1-5 s); the con
 voltage is sampled at 2 kHz. The backbone is the static contact (the probe pressed from
 the first sample, leaving the sensor at the end of the pass) seen through the inverse of
 the calibration eq. 6; the touch (press), the slip vibrations and the impulsive
-disturbances are effects (:mod:`slipkit.families.fsr.effects`). See ``docs/simulation/fsr.md``.
+disturbances are effects (:mod:`slipkit.families.fsr.effects`). See ``docs/families/fsr.md``.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """SlipTack acceleration from the nib deflection (eqs. 4 and 5): the batch estimator and its stream.
 
-Part of the SlipTack baselines (:mod:`slipkit.families.sliptack.speed`, ``docs/baselines/sliptack.md``).
+Part of the SlipTack baselines (:mod:`slipkit.families.sliptack.speed`, ``docs/families/sliptack.md``).
 """
 
 from __future__ import annotations

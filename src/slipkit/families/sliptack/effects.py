@@ -2,7 +2,7 @@
 
 Both read the trial's object motion from ``state.truth["motion"]`` (set by the scene
 models in :mod:`slipkit.families.sliptack.scene`) and add to the nib signal in mm.
-Physics: :mod:`slipkit.families.sliptack.physics`; documentation: ``docs/simulation/sliptack.md``.
+Physics: :mod:`slipkit.families.sliptack.physics`; documentation: ``docs/families/sliptack.md``.
 """
 
 from __future__ import annotations

@@ -27,7 +27,7 @@ bias (the scaler and the coefficients folded into :meth:`weights`).
 Both choose a free threshold for early, correct decisions (``calibration="onset"``,
 :class:`~slipkit.baselines.generic.OnsetCalibration`): each training recording's largest
 score in its first ``onset_frames`` slip frames against its largest score before the
-onset. ``docs/baselines/sliptack.md`` ("Onset detectors") states what they assume.
+onset. ``docs/families/sliptack.md`` ("Onset detectors") states what they assume.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ cherry, basswood and acrylic pulled at 10-100 mm/s across the sensor);
 ``sliptack_drop`` its acceleration trials (Section IV-D, eq. 4: a 283 g object released
 from a parallel-jaw grip). The backbone holds the object's motion and the nib stream at
 zero; the nib's response is added by the effects ``stick_slip`` and ``gross_deflection``
-(:mod:`slipkit.families.sliptack.effects`). See ``docs/simulation/sliptack.md``.
+(:mod:`slipkit.families.sliptack.effects`). See ``docs/families/sliptack.md``.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """SlipTack: speed from the stick-slip frequency, acceleration from the nib deflection.
 
-Follows the SlipTack paper (seed 000, ``docs/baselines/sliptack.md``):
+Follows the SlipTack paper (seed 000, ``docs/families/sliptack.md``):
 
 * **dominant frequency** (Sec. IV-C, eqs. 6-7) -- :func:`dominant_frequency`: subtract a
   300-frame moving average, Hamming window, DFT (``numpy.fft.rfft``); the spectrum's local

@@ -1,6 +1,6 @@
 """SlipTack torsional slip: the RMS of the nib signal in the ~10 Hz band (a stream detector).
 
-Part of the SlipTack baselines (:mod:`slipkit.families.sliptack.speed`, ``docs/baselines/sliptack.md``).
+Part of the SlipTack baselines (:mod:`slipkit.families.sliptack.speed`, ``docs/families/sliptack.md``).
 """
 
 from __future__ import annotations

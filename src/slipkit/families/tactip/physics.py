@@ -13,7 +13,7 @@ A ``pins`` stream holds ``2 * N`` channels: ``x0 .. x{N-1}`` then ``y0 .. y{N-1}
 each ring ordered counter-clockwise from +x. :func:`split_pins` and
 :func:`join_pins` convert between this flat layout and ``(..., N, 2)`` arrays.
 
-Contact model (assumptions, documented in ``docs/simulation/tactip.md``)
+Contact model (assumptions, documented in ``docs/families/tactip.md``)
 -----------------------------------------------------------------------
 Normal force follows Hertz, ``F_n = K δ^1.5`` (δ indentation, mm). The contact patch
 is an ellipse with semi-axes ``a = sqrt(R δ)`` along each axis, where ``R`` is the

@@ -9,7 +9,7 @@ indentation causes in and around the contact patch, and the ground truth
 (``truth_grip``: normal force, indentation, hold ratio, object drop). The skin's
 pre-slip stretch, the snap-back at onset, post-slip sliding, detection jitter and
 missing pins are effects (``slipkit.families.tactip.effects``); a scene has only those
-it lists. See ``docs/simulation/tactip.md``.
+it lists. See ``docs/families/tactip.md``.
 """
 
 from __future__ import annotations
