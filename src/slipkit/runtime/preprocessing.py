@@ -780,5 +780,7 @@ def _press_sign(f: Fields, in_shape: tuple[int, ...]) -> Op:
     return _PressSign(rest_n, block, hop, delta, in_shape, float(sign))
 
 
-# -- the SlipTack spectrum, updated per hop (its own module; registers on import) ------------
+# -- ops in their own modules (register on import): the GelSight contact window held per
+# stream, the SlipTack spectrum updated per hop ----------------------------------------------
+from slipkit.runtime import contact_window as _contact_window  # noqa: E402, F401
 from slipkit.runtime import sliding_spectrum as _sliding_spectrum  # noqa: E402, F401
