@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -157,3 +159,62 @@ def test_onnx_graph_with_the_step_decides_as_the_detector(
     ctx = StreamContext("camera_0", [], [], [], lambda ids: [])
     steps = runtime_steps(det, ctx)
     assert steps.steps == list(graph.preprocessing)
+
+
+def test_bundle_in_the_runtime_loop_decides_as_the_detector(tmp_path: Path) -> None:
+    """The bundle (graph + contact_window), each recording through StreamLoop from a
+    reset, decides as the batch detector at every frame from its first decision."""
+    from slipkit.families.gelsight.export import export_pin_contact
+    from slipkit.runtime import StreamLoop, load_bundle, write_bundle
+
+    X, seg = _recordings()
+    det = PinContactDetector(horizon=60, threshold=None)
+    det.fit(X, np.zeros(len(X), int), segments=seg)
+    s = det.decision_function(X, segments=seg)
+    det.set_params(threshold=float(np.median(s[np.isfinite(s)])))
+    det.fit(X, np.zeros(len(X), int), segments=seg)
+    graph = export_pin_contact(det)
+    decision = {**graph.decision(), "positive": "1"}
+    del decision["threshold"]
+    manifest = {
+        "name": "gelsight_contact",
+        "frame": {
+            "streams": ["camera_0"],
+            "channels": [f"x_{i}" for i in range(25)] + [f"y_{i}" for i in range(25)],
+            "shape": [50],
+            "window": graph.window,
+            "hop": graph.hop,
+            "rate_hz": 25.0,
+        },
+        "preprocessing": [dict(st) for st in graph.preprocessing],
+        "inputs": [
+            {
+                "name": graph.input_name,
+                "dtype": graph.input_dtype,
+                "shape": [1, *graph.input_shape[1:]],
+            }
+        ],
+        "outputs": [{"name": "score", "dtype": "float32"}],
+        "decision": decision,
+        "threshold": graph.threshold,
+        "debounce": {"k": 1},
+        "budget_ms": {"frame_period": 40.0, "p99": 4.0},
+        "opset": graph.opset,
+        "producer": graph.producers,
+    }
+    loop = StreamLoop(
+        load_bundle(write_bundle(tmp_path / "gs", graph.serialize(), manifest))
+    )
+    fired = 0
+    for k in range(3):
+        x = X[seg == k]
+        loop.reset()
+        for row in x:
+            loop.step(row.astype(np.float32))
+        res = loop.result()
+        later = res.frame >= graph.first_decision
+        ref = det.decision_function(x)[res.frame[later]]
+        assert (ref >= det.threshold_).tolist() == res.slip[later].tolist()
+        assert not res.slip[~later].any()
+        fired += int(res.slip.sum())
+    assert fired > 0
