@@ -61,6 +61,12 @@ op                           parameters, effect
                              per-stream rest level
                              (:class:`slipkit.families.fsr.touch_slip.FSRTouchSlip`, voltage
                              input; ``sign`` 0 for ``polarity="per_recording"``)
+``contact_window``           ``arm``, ``window``, ``min_frames``, ``horizon``
+                             (optional): one frame of ``2K`` pin positions ->
+                             the window since contact in marker pitches and a
+                             decide row ``(window + 1, 2K)``, the frame counter,
+                             pitch and reference held from the *stream*
+                             (stateful; :mod:`slipkit.runtime.contact_window`)
 ===========================  =====================================================
 """
 
