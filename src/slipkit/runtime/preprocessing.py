@@ -61,6 +61,12 @@ op                           parameters, effect
                              per-stream rest level
                              (:class:`slipkit.families.fsr.touch_slip.FSRTouchSlip`, voltage
                              input; ``sign`` 0 for ``polarity="per_recording"``)
+``contact_window``           ``arm``, ``window``, ``min_frames``, ``horizon``
+                             (optional): one frame of ``2K`` pin positions ->
+                             the window since contact in marker pitches and a
+                             decide row ``(window + 1, 2K)``, the frame counter,
+                             pitch and reference held from the *stream*
+                             (stateful; :mod:`slipkit.runtime.contact_window`)
 ===========================  =====================================================
 """
 
@@ -780,5 +786,7 @@ def _press_sign(f: Fields, in_shape: tuple[int, ...]) -> Op:
     return _PressSign(rest_n, block, hop, delta, in_shape, float(sign))
 
 
-# -- the SlipTack spectrum, updated per hop (its own module; registers on import) ------------
+# -- ops in their own modules (register on import): the GelSight contact window held per
+# stream, the SlipTack spectrum updated per hop ----------------------------------------------
+from slipkit.runtime import contact_window as _contact_window  # noqa: E402, F401
 from slipkit.runtime import sliding_spectrum as _sliding_spectrum  # noqa: E402, F401

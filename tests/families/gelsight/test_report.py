@@ -108,3 +108,22 @@ def test_divergence_per_path_ranks_a_spreading_field_above_a_larger_shake() -> N
     plain = PinMotionDetector(quantity="divergence", window=50)
     assert per_path.trial_score(spread) > per_path.trial_score(shake)
     assert plain.trial_score(spread) < plain.trial_score(shake)
+
+
+def test_one_split_scores_only_its_test_objects() -> None:
+    from slipkit.families.gelsight.report import _score_folds
+
+    trials, y, g = _data({True: 80, False: 80})
+    tr = np.flatnonzero(np.isin(g, ["o0", "o1", "o2", "o3"]))
+    te = np.flatnonzero(np.isin(g, ["o4", "o5"]))
+    steady = Candidate(
+        "steady", (("w25", lambda: PinMotionDetector(quantity="steady", window=25)),)
+    )
+    r = _score_folds(steady, trials, y, g, [(tr, te)], seed=0, inner=2)
+    assert r["balanced_accuracy"] == 1.0
+    assert r["chosen"] == ["w25"]
+    # a detector that fires on every trial: recall 1 and every test wiggle alarmed
+    always = Candidate("len", (("", ClipLengthControl),))
+    short = [{"camera_0": t["camera_0"][:40]} for t in trials]
+    r = _score_folds(always, short, y, g, [(tr, te)], seed=0, inner=2)
+    assert r["balanced_accuracy"] == 0.5

@@ -1,4 +1,10 @@
-"""Exporter of :class:`~slipkit.families.gelsight.stream.PinDivergenceDetector`: ONNX ops only.
+"""Exporters of the GelSight stream detectors: ONNX ops only.
+
+:class:`~slipkit.families.gelsight.stream.PinContactDetector` (:func:`export_pin_contact`)
+reads one frame per call; the runtime step ``contact_window``
+(:mod:`slipkit.runtime.contact_window`) holds its frame counter, pitch and reference.
+
+:class:`~slipkit.families.gelsight.stream.PinDivergenceDetector`:
 
 Input: the last ``window`` frames of one fingertip's pin positions ``(batch, W, 2K)``
 (px, ``x_0..x_{K-1}`` then ``y_0..y_{K-1}``, oldest first; the marker tracker stays on
@@ -13,13 +19,27 @@ matrix (the adjugate's signs) and two sums. Fewer than three pins or a degenerat
 
 from __future__ import annotations
 
+from dataclasses import replace
+from typing import Any
+
 import numpy as np
 from sklearn.utils.validation import check_is_fitted
 
 from slipkit.export._graph import DOUBLE, GraphBuilder
 from slipkit.export.detector_graph import DetectorGraph, _finish, _graph, _prologue
-from slipkit.export.registry import DEFAULT_OPSET, ExportError, register_exporter
-from slipkit.families.gelsight.stream import PinDivergenceDetector
+from slipkit.export.registry import (
+    DEFAULT_OPSET,
+    ExportError,
+    RuntimeSteps,
+    StreamContext,
+    register_exporter,
+    register_runtime_steps,
+)
+from slipkit.families.gelsight.stream import (
+    MIN_PATH,
+    PinContactDetector,
+    PinDivergenceDetector,
+)
 
 #: flattened [Sxx, Sxy, Sxy, Syy] @ _ADJ = [Syy, -Sxy, -Sxy, Sxx] (the adjugate, row-major)
 _ADJ = np.array(
@@ -133,6 +153,143 @@ def export_pin_divergence(
     )
 
 
-register_exporter(PinDivergenceDetector, export_pin_divergence)
+def contact_window_step(detector: PinContactDetector) -> dict[str, Any]:
+    """The runtime step holding the contact window (:mod:`slipkit.runtime.contact_window`)."""
+    step: dict[str, Any] = {
+        "op": "contact_window",
+        "arm": int(detector.arm),
+        "window": int(detector.window),
+        "min_frames": int(detector.min_frames),
+    }
+    if detector.horizon is not None:
+        step["horizon"] = int(detector.horizon)
+    return step
 
-__all__ = ["export_pin_divergence"]
+
+def export_pin_contact(
+    detector: PinContactDetector, *, opset: int = DEFAULT_OPSET
+) -> DetectorGraph:
+    """Export a fitted :class:`PinContactDetector`: one frame in, the runtime step
+    ``contact_window`` (frame counter, pitch, held reference) before the graph.
+
+    Graph input ``(batch, W + 1, 2K)``: the step's window in pitches and its decide row.
+    The graph fits the affine map from the window's first to its last frame (``M = c
+    c^T``, ``G = c d^T``, ``trace(M^-1 G)`` through the constant adjugate, as
+    :func:`export_pin_divergence`), sums the norms of the frame-to-frame mean pin
+    steps (the path) and scores ``quantity``; a row that does not decide, or a
+    degenerate ``M``, scores ``NO_SCORE``.
+    """
+    check_is_fitted(detector, "threshold_")
+    ch = int(detector.n_features_in_)
+    if ch < 6 or ch % 2:
+        raise ExportError(
+            f"PinContactDetector reads 2K pin channels (K >= 3); fit saw {ch}"
+        )
+    k, w = ch // 2, int(detector.window)
+    g = GraphBuilder("gelsight_pin_contact", opset)
+    inp, x = _prologue(g, w + 1, ch)
+    i64 = np.int64
+
+    def rows(a: int, b: int) -> str:
+        return g.op("Slice", x, g.const([a], i64), g.const([b], i64), g.const([1], i64))
+
+    decide = g.op(
+        "Greater",
+        g.op("Reshape", rows(w, w + 1), g.const([-1, ch], i64)),
+        g.const(0.5, np.float64),
+    )
+    decide = g.op(
+        "Reshape",
+        g.op("Slice", decide, g.const([0], i64), g.const([1], i64), g.const([1], i64)),
+        g.const([-1], i64),
+    )  # (B,)
+    shape = g.const([-1, 2, k], i64)
+    first = g.op("Reshape", g.op("Gather", x, g.const(0, i64), axis=1), shape)
+    last = g.op("Reshape", g.op("Gather", x, g.const(w - 1, i64), axis=1), shape)
+    c = g.op(
+        "Sub", first, g.op("Div", _sum(g, first, [2]), g.const(float(k), np.float64))
+    )
+    d = g.op("Sub", last, first)
+    mm = g.op("MatMul", c, g.op("Transpose", c, perm=[0, 2, 1]))  # (B, 2, 2)
+    gg = g.op("MatMul", c, g.op("Transpose", d, perm=[0, 2, 1]))
+    flat = g.const([-1, 4], i64)
+    mf, gf = g.op("Reshape", mm, flat), g.op("Reshape", gg, flat)
+    adj = g.op("MatMul", mf, g.const(_ADJ, np.float64))
+    num = _sum(g, g.op("Mul", adj, gf), [1], 0)
+    det2 = _sum(g, g.op("Mul", adj, mf), [1], 0)  # 2 det M
+    div = g.op("Div", g.op("Mul", num, g.const(2.0, np.float64)), det2)
+    # path: sum over the window of |mean pin step| (pitches)
+    steps = g.op("Sub", rows(1, w), rows(0, w - 1))  # (B, W-1, 2K)
+    steps = g.op("Reshape", steps, g.const([-1, w - 1, 2, k], i64))
+    mean_step = g.op(
+        "Div", _sum(g, steps, [3], 0), g.const(float(k), np.float64)
+    )  # (B, W-1, 2)
+    speed = g.op("Sqrt", _sum(g, g.op("Mul", mean_step, mean_step), [2], 0))
+    path = _sum(g, speed, [1], 0)  # (B,)
+    if detector.quantity == "divergence":
+        score = g.op("Abs", div)
+    elif detector.quantity == "contraction":
+        score = g.op("Neg", div)
+    else:
+        score = g.op(
+            "Div", g.op("Abs", div), g.op("Max", path, g.const(MIN_PATH, np.float64))
+        )
+    good = g.op("And", decide, g.op("Greater", det2, g.const(0.0, np.float64)))
+    score = g.op("Where", good, score, g.const(-np.inf, np.float64))
+    model = _finish(g, inp, score, f"PinContactDetector over {w} pin frames")
+    graph = _graph(
+        detector,
+        model,
+        opset=g.opset,
+        window=1,
+        channels=ch,
+        hop=1,
+        first_decision=int(detector.arm) + int(detector.min_frames) - 1,
+        score_meaning=(
+            f"{detector.quantity} of the pin field over the contact window "
+            "(dimensionless; path in marker pitches); slip where score >= threshold"
+        ),
+        input_meaning=(
+            f"one frame of x_0..x_{k - 1}, y_0..y_{k - 1} (px); the runtime step "
+            f"contact_window makes the {w}-frame window in pitches and its decide row"
+        ),
+        features={
+            "n_pins": k,
+            "window": w,
+            "arm": int(detector.arm),
+            "horizon": detector.horizon,
+            "quantity": detector.quantity,
+        },
+    )
+    return replace(
+        graph,
+        input_shape=("batch", w + 1, ch),
+        preprocessing=(contact_window_step(detector),),
+    )
+
+
+def contact_runtime_steps(
+    detector: PinContactDetector, ctx: StreamContext
+) -> RuntimeSteps:
+    """The ``contact_window`` step on the gripper PC (counter, pitch, held reference)."""
+    del ctx
+    step = contact_window_step(detector)
+    watch = (
+        "the whole recording"
+        if detector.horizon is None
+        else f"{detector.horizon} frames after arming"
+    )
+    return RuntimeSteps(
+        steps=[step],
+        notes=[
+            f"contact_window: armed {detector.arm} frames into each stream, watching "
+            f"{watch}; start the loop (or reset it) when the grasp closes"
+        ],
+    )
+
+
+register_exporter(PinDivergenceDetector, export_pin_divergence)
+register_exporter(PinContactDetector, export_pin_contact)
+register_runtime_steps(PinContactDetector, contact_runtime_steps)
+
+__all__ = ["contact_window_step", "export_pin_contact", "export_pin_divergence"]

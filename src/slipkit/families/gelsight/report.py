@@ -12,6 +12,11 @@ scored once. Per seed the held-out trials of all folds are pooled: balanced accu
 (trial = slip when the detector ever fires), slip recall, wiggle false-alarm rate and
 the frame of first alarm; the table gives mean and sd over seeds.
 
+``--split-of RUN [RUN ...]`` scores instead on the train / test split of ``slipkit
+train`` run folders (one per seed: the setting and threshold chosen by inner group CV
+on the run's training objects, its test objects scored once) and prints each run's own
+test trial events beside them: the controls next to a deployed detector.
+
 ``--arm`` sets when the whole-recording detectors are armed; the contact-phase ones
 (``divergence_contact``, ``contact_motion``) are armed at :data:`CONTACT_ARMS`, so their
 displacement reference is the start of contact.
@@ -215,30 +220,65 @@ def evaluate(
     inner: int = 4,
 ) -> dict[str, Any]:
     """Nested group CV of one detector for one seed (see the module doc)."""
+    cv = GroupKFold(n_splits=outer, shuffle=True, random_state=seed)
+    folds = list(cv.split(np.zeros(len(y)), y, g))
+    return _score_folds(cand, trials, y, g, folds, seed=seed, inner=inner)
+
+
+def _fit_best(
+    cand: Candidate,
+    trials: Sequence[Trial],
+    y: np.ndarray,
+    g: np.ndarray,
+    tr: np.ndarray,
+    *,
+    seed: int,
+    inner: int,
+) -> tuple[Any, str]:
+    """The setting of best inner-CV balanced accuracy on the trials ``tr``, refitted
+    on them with the threshold chosen on their out-of-fold scores."""
+    best: tuple[float, str, Factory, float] | None = None
+    for label, factory in cand.settings:
+        s = _oof_scores(factory, [trials[i] for i in tr], y[tr], g[tr], inner, seed)
+        thr = choose_threshold(s.tolist(), y[tr].tolist())
+        ba = _ba(s >= thr, y[tr])
+        if best is None or ba > best[0]:
+            best = (ba, label, factory, thr)
+    assert best is not None
+    _, label, factory, thr = best
+    det = factory().fit([trials[i] for i in tr], y[tr])
+    det.threshold_ = thr
+    return det, label
+
+
+def _score_folds(
+    cand: Candidate,
+    trials: Sequence[Trial],
+    y: np.ndarray,
+    g: np.ndarray,
+    folds: Sequence[tuple[np.ndarray, np.ndarray]],
+    *,
+    seed: int,
+    inner: int,
+) -> dict[str, Any]:
+    """Fit on each fold's training trials (:func:`_fit_best`), score its test trials
+    once; the pooled test trials' rates."""
+    scored = np.zeros(len(y), dtype=bool)
     fired = np.zeros(len(y), dtype=bool)
     first = np.full(len(y), np.nan)
     chosen: list[str] = []
-    cv = GroupKFold(n_splits=outer, shuffle=True, random_state=seed)
-    for tr, te in cv.split(np.zeros(len(y)), y, g):
-        best: tuple[float, str, Factory, float] | None = None
-        for label, factory in cand.settings:
-            s = _oof_scores(factory, [trials[i] for i in tr], y[tr], g[tr], inner, seed)
-            thr = choose_threshold(s.tolist(), y[tr].tolist())
-            ba = _ba(s >= thr, y[tr])
-            if best is None or ba > best[0]:
-                best = (ba, label, factory, thr)
-        assert best is not None
-        _, label, factory, thr = best
-        det = factory().fit([trials[i] for i in tr], y[tr])
-        det.threshold_ = thr
+    for tr, te in folds:
+        det, label = _fit_best(cand, trials, y, g, tr, seed=seed, inner=inner)
         chosen.append(label)
         for i in te:
             a = det.alarm(trials[i])
+            scored[i] = True
             fired[i] = a is not None
             first[i] = np.nan if a is None else a
+    y = np.where(scored, y, -1)
     slip, wig = y == 1, y == 0
     return {
-        "balanced_accuracy": _ba(fired, y),
+        "balanced_accuracy": _ba(fired[y >= 0], y[y >= 0]),
         "slip_recall": float(fired[slip].mean()),
         "wiggle_false_alarm": float(fired[wig].mean()),
         "first_alarm_frame_slip": float(np.nanmedian(first[slip & fired]))
@@ -296,6 +336,77 @@ def run(
     return out
 
 
+def run_split(
+    dataset: Dataset,
+    runs: Sequence[Path],
+    names: Sequence[str] | None = None,
+    *,
+    arm: int = 12,
+    inner: int = 4,
+) -> dict[str, Any]:
+    """Every detector and control on the train / test split of each run folder (a
+    ``slipkit train`` run on this dataset: ``metrics.json`` ``split``), the setting and
+    threshold chosen by inner group CV on its training trials, its test trials scored
+    once; beside them each run's own test trial events (``test.operating_point``)."""
+    from slipkit.errors import SlipkitError
+
+    trials, y, g, ids = load_trials(dataset)
+    index = {t: i for i, t in enumerate(ids)}
+    rows: dict[str, Any] = {}
+    per_run: list[dict[str, Any]] = []
+    splits = []
+    for path in runs:
+        metrics_path = Path(path) / "metrics.json"
+        try:
+            m = json.loads(metrics_path.read_text())
+            split = m["split"]
+            seed = int(json.loads((Path(path) / "run.json").read_text())["seed"])
+            tr = np.array([index[str(t)] for t in split["train"]])
+            te = np.array([index[str(t)] for t in split["test"]])
+        except (OSError, ValueError, KeyError) as exc:
+            raise SlipkitError(
+                f"{metrics_path}: not a run of this dataset with a split ({exc})"
+            ) from None
+        splits.append((seed, tr, te))
+        op = m["test"]["operating_point"]
+        recall, early = float(op["detected_rate"]), float(op["early_alarm_rate"])
+        per_run.append(
+            {
+                "balanced_accuracy": (recall + 1.0 - early) / 2,
+                "slip_recall": recall,
+                "wiggle_false_alarm": early,
+                "first_alarm_frame_slip": math.nan,
+                "chosen": [f"{m['name']}: debounce {op['debounce_k']}"],
+            }
+        )
+    groups = [("run", "deployed", per_run)]
+    for cand in candidates(0, arm):
+        if names and cand.name not in names:
+            continue
+        per_seed = []
+        for seed, tr, te in splits:
+            c = next(c for c in candidates(seed, arm) if c.name == cand.name)
+            per_seed.append(
+                _score_folds(c, trials, y, g, [(tr, te)], seed=seed, inner=inner)
+            )
+        groups.append((cand.name, cand.kind, per_seed))
+    for name, kind, per_seed in groups:
+        keys = [k for k in per_seed[0] if k != "chosen"]
+        rows[name] = {
+            "kind": kind,
+            **{
+                k: {
+                    "mean": _nan_stat(np.nanmean, [r[k] for r in per_seed]),
+                    "sd": _nan_stat(np.nanstd, [r[k] for r in per_seed]),
+                }
+                for k in keys
+            },
+            "per_seed": per_seed,
+        }
+        print(_row(name, rows[name]), flush=True)
+    return {"runs": [str(p) for p in runs], "results": rows}
+
+
 def _row(name: str, r: dict[str, Any]) -> str:
     def ms(k: str, d: int = 2) -> str:
         return f"{r[k]['mean']:.{d}f} +- {r[k]['sd']:.{d}f}"
@@ -322,12 +433,24 @@ def main(argv: Sequence[str] | None = None) -> None:
         default=12,
         help="frames before the detectors are armed (12: 0.5 s)",
     )
+    ap.add_argument(
+        "--split-of",
+        nargs="+",
+        metavar="RUN",
+        help="score on the train / test split of these slipkit train run folders "
+        "(one per seed) instead of nested CV, beside the runs' own test events",
+    )
     args = ap.parse_args(argv)
     print(
         "| detector | kind | balanced accuracy | slip recall | wiggle false alarms | first alarm (frame) |"
     )
     print("|---|---|---|---|---|---|")
-    res = run(load_dataset(args.dataset), args.seeds, args.only, arm=args.arm)
+    data = load_dataset(args.dataset)
+    res = (
+        run_split(data, [Path(p) for p in args.split_of], args.only, arm=args.arm)
+        if args.split_of
+        else run(data, args.seeds, args.only, arm=args.arm)
+    )
     if args.out:
         out = Path(args.out)
         tmp = out.with_suffix(out.suffix + ".tmp")

@@ -18,9 +18,10 @@ from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
-from sklearn.utils._param_validation import Interval
+from sklearn.utils._param_validation import Interval, StrOptions
 
 from slipkit.baselines.base import StreamDetector
+from slipkit.families.gelsight.features import FEATURES, FeatureStream, trial_features
 
 FloatArray = NDArray[np.float64]
 
@@ -110,7 +111,7 @@ class PinDivergenceDetector(StreamDetector):
         Xv = super()._check_X(X, reset=reset)
         if Xv.shape[1] % 2 or Xv.shape[1] < 6:
             raise ValueError(
-                "PinDivergenceDetector reads pin frames x_0..x_{K-1}, y_0..y_{K-1} (an "
+                f"{type(self).__name__} reads pin frames x_0..x_{{K-1}}, y_0..y_{{K-1}} (an "
                 f"even number of channels, K >= 3 pins); X has {Xv.shape[1]}"
             )
         return Xv
@@ -149,4 +150,139 @@ class PinDivergenceDetector(StreamDetector):
         return _DivergenceStream(int(self.window), float(self.threshold_))
 
 
-__all__ = ["PinDivergenceDetector", "window_divergence"]
+#: path floor (marker pitches) of ``divergence_per_path`` (as
+#: :data:`slipkit.families.gelsight.detectors.MIN_PATH`; tracking jitter is ~0.01 pitch)
+MIN_PATH = 0.02
+_DIV, _PATH = FEATURES.index("divergence"), FEATURES.index("path")
+
+
+def contact_score(quantity: str, features: FloatArray) -> FloatArray:
+    """The score of window features ``(n, F)``: ``divergence_per_path``
+    (|divergence| / max(path, :data:`MIN_PATH`)), ``divergence`` (|divergence|) or
+    ``contraction`` (minus the divergence)."""
+    div = features[..., _DIV]
+    if quantity == "divergence":
+        return np.abs(div)
+    if quantity == "contraction":
+        return -div
+    return np.abs(div) / np.maximum(features[..., _PATH], MIN_PATH)
+
+
+class _ContactStream:
+    def __init__(
+        self,
+        quantity: str,
+        window: int,
+        arm: int,
+        horizon: int | None,
+        min_frames: int,
+        threshold: float,
+    ) -> None:
+        self.quantity, self.threshold = quantity, threshold
+        self.arm, self.horizon = arm, horizon
+        self._features = FeatureStream(window=window, arm=arm, min_frames=min_frames)
+        self.reset()
+
+    def reset(self) -> None:
+        self._features.reset()
+        self._t = 0
+
+    def update(self, sample: Any) -> tuple[float, bool]:
+        t = self._t
+        self._t += 1
+        if self.horizon is not None and t >= self.arm + self.horizon:
+            return -np.inf, False
+        f = self._features.update(np.asarray(sample, dtype=np.float64).reshape(-1))
+        if f is None:
+            return -np.inf, False
+        s = float(contact_score(self.quantity, f))
+        s = s if np.isfinite(s) else -np.inf
+        return s, bool(s >= self.threshold)
+
+
+class PinContactDetector(PinDivergenceDetector):
+    """The contact-phase pin-field detector (the report's ``contact_motion``) on one
+    fingertip: armed ``arm`` frames into the recording, positions in pitches of the
+    first armed frame, the window from the first armed frame (held) until it holds
+    ``window`` frames, then the last ``window``; it scores ``quantity`` of the
+    affine fit and the field's path (:mod:`slipkit.families.gelsight.features`) and
+    stops watching ``horizon`` frames after arming.
+
+    Parameters
+    ----------
+    quantity : {"divergence_per_path", "divergence", "contraction"}
+        The score (:func:`contact_score`).
+    window : int
+        Frames of the window, 2 .. 50.
+    arm : int
+        Frames ignored at the start (the contact is made).
+    horizon : int or None
+        Frames after arming it watches (None: the whole recording).
+    min_frames : int
+        Armed frames before the first score.
+    threshold, roc_point, quantile
+        As :class:`PinDivergenceDetector` (the task's operating point chooses it).
+    """
+
+    QUANTITIES = ("divergence_per_path", "divergence", "contraction")
+
+    _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
+        **PinDivergenceDetector._parameter_constraints,
+        "quantity": [StrOptions(set(QUANTITIES))],
+        "arm": [Interval(Integral, 0, None, closed="left")],
+        "horizon": [Interval(Integral, 1, None, closed="left"), None],
+        "min_frames": [Interval(Integral, 2, 50, closed="both")],
+    }
+
+    def __init__(
+        self,
+        *,
+        quantity: str = "divergence_per_path",
+        window: int = 50,
+        arm: int = 3,
+        horizon: int | None = 200,
+        min_frames: int = 5,
+        threshold: float | None = None,
+        roc_point: str = "youden",
+        quantile: float = 0.99,
+    ) -> None:
+        super().__init__(
+            window=window, threshold=threshold, roc_point=roc_point, quantile=quantile
+        )
+        self.quantity = quantity
+        self.arm = arm
+        self.horizon = horizon
+        self.min_frames = min_frames
+
+    def _scores(self, X: FloatArray) -> FloatArray:
+        f = trial_features(
+            X,
+            window=int(self.window),
+            arm=int(self.arm),
+            min_frames=int(self.min_frames),
+        )
+        with np.errstate(invalid="ignore", divide="ignore"):
+            s = contact_score(self.quantity, f)
+        s = np.where(np.isfinite(s), s, -np.inf)
+        if self.horizon is not None:
+            s[int(self.arm) + int(self.horizon) :] = -np.inf
+        return s
+
+    def _new_stream(self) -> _ContactStream:  # type: ignore[override]
+        return _ContactStream(
+            self.quantity,
+            int(self.window),
+            int(self.arm),
+            None if self.horizon is None else int(self.horizon),
+            int(self.min_frames),
+            float(self.threshold_),
+        )
+
+
+__all__ = [
+    "MIN_PATH",
+    "PinContactDetector",
+    "PinDivergenceDetector",
+    "contact_score",
+    "window_divergence",
+]
