@@ -93,7 +93,6 @@ def test_runtime_steps_come_from_the_detector_class_not_the_deployer():
     registered beside their graphs; a class without an entry gets no step; a second
     registration is refused."""
     import slipkit.export  # noqa: F401  (registers every family's exporters)
-    from slipkit.baselines.biotac import PressureVibration
     from slipkit.export.registry import (
         _RUNTIME_STEPS,
         ExportError,
@@ -102,6 +101,7 @@ def test_runtime_steps_come_from_the_detector_class_not_the_deployer():
         register_runtime_steps,
         runtime_steps,
     )
+    from slipkit.families.biotac.detectors import PressureVibration
     from slipkit.families.fsr.onset import FSROnset, FSROnsetLogistic
     from slipkit.families.fsr.touch_slip import FSRTouchSlip
 

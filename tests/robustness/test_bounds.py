@@ -14,8 +14,9 @@ import pytest
 from omegaconf import OmegaConf
 
 from slipkit.cli import main
-from slipkit.closedloop import biotac, tactip
+from slipkit.closedloop import tactip
 from slipkit.errors import SlipkitError
+from slipkit.families.biotac import scenario as biotac
 from slipkit.families.fsr import scenario as fsr
 from slipkit.families.sliptack import scenario as sliptack
 

@@ -12,9 +12,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from slipkit.baselines.biotac import ForceDerivative, PressureVibration
 from slipkit.baselines.davis import DavisPolarity
 from slipkit.errors import SlipkitError
+from slipkit.families.biotac.detectors import ForceDerivative, PressureVibration
 from slipkit.families.fsr.touch_slip import FSRTouchSlip
 from slipkit.families.sliptack.accel import DropAcceleration
 from slipkit.families.sliptack.speed import (

@@ -18,8 +18,8 @@ import slipkit
 from slipkit.data.importers.robotic_finger import read_robotic_finger
 from slipkit.data.io import save_dataset
 from slipkit.errors import SlipkitError
+from slipkit.families.biotac.physics import linear_drive_matrix
 from slipkit.models.force import LocalLinearRegressor, WeightedNormalsRegressor
-from slipkit.physics.biotac import linear_drive_matrix
 from slipkit.sim.commands import build_scene
 from slipkit.train.commands import evaluate_main, train_main
 from slipkit.train.tasks.force import ForceRegression

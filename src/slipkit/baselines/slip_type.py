@@ -3,7 +3,7 @@
 The slip-type task (:class:`~slipkit.train.tasks.slip_type.WindowClassification`,
 ``comparison=biotac_slip_type``; Su et al. 2015, Sec. IV-C) asks whether a window shows
 linear or rotational slip. The skin dragged by a slipping object shifts the electrode
-pattern by ``w_i (u(p_i) . d)`` (:func:`slipkit.sim.effects.biotac.slip_deformation`):
+pattern by ``w_i (u(p_i) . d)`` (:func:`slipkit.families.biotac.effects.slip_deformation`):
 under linear slip ``u`` is one drag along the load direction ``d``, so every electrode
 near the contact changes with the same sign; under rotation ``u = twist n x (p - c)``
 is antisymmetric about the load line, so electrodes on either side change with opposite

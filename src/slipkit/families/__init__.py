@@ -10,7 +10,7 @@ scene and scenario resolves, each config and doc page exists.
 
 The records hold strings only, resolved on demand (:func:`resolve`), so this module imports
 nothing of the stages and any stage may read it. A family packaged as one folder lives in
-``slipkit/families/<name>/`` (``gelsight``, ``sliptack``, ``fsr``); :data:`PLUGIN_MODULES` names the
+``slipkit/families/<name>/`` (``gelsight``, ``sliptack``, ``fsr``, ``biotac``); :data:`PLUGIN_MODULES` names the
 modules of such folders that register plug-ins when imported, by kind, and the stage owning a
 kind imports them by name (:func:`load_plugins`), never statically.
 """
@@ -75,6 +75,8 @@ _SLIPTACK_EXPORTERS = tuple(
 )
 _FSR = "slipkit.families.fsr."
 _FSR_EXPORTERS = (_FSR + "export.touch_slip", _FSR + "export.onset")
+_BT = "slipkit.families.biotac."
+_BIOTAC_EXPORTERS = (_BT + "export.detectors",)
 
 FAMILIES: dict[str, Family] = {
     f.name: f
@@ -109,7 +111,7 @@ FAMILIES: dict[str, Family] = {
             compares=(_T + "force:ForceRegression", _WINDOWS, _DETECT),
             exporters=(
                 "slipkit.export.force",
-                "slipkit.export.biotac_detectors",
+                *_BIOTAC_EXPORTERS,
                 "slipkit.export.window_analytic",
                 "slipkit.export.window_stats",
                 "slipkit.export.generic",
@@ -124,6 +126,7 @@ FAMILIES: dict[str, Family] = {
                 "models/force.md",
                 "models/slip_type.md",
             ),
+            detectors=(_BT + "detectors",),
         ),
         Family(
             name="fsr",
@@ -197,11 +200,12 @@ PLUGIN_MODULES: dict[str, tuple[str, ...]] = {
         "slipkit.families.gelsight.export",
         *_SLIPTACK_EXPORTERS,
         *_FSR_EXPORTERS,
+        *_BIOTAC_EXPORTERS,
     ),
     "deployers": (_ST + "deploy",),
     "adapters": (_ST + "adapter",),
-    "scenarios": (_ST + "scenario", _FSR + "scenario"),
-    "effects": (_ST + "effects", _FSR + "effects"),
+    "scenarios": (_ST + "scenario", _FSR + "scenario", _BT + "scenario"),
+    "effects": (_ST + "effects", _FSR + "effects", _BT + "effects"),
     "tasks": (_ST + "task",),
 }
 

@@ -6,7 +6,7 @@ fingertip applies, ``(Fx, Fy, Fz)`` in N:
 
 - :class:`WeightedNormalsRegressor`: the analytic baseline
   ``F_k = S_k sum_i E_i N_k,i + o_k`` with the electrode normals ``N_i`` of
-  :mod:`slipkit.physics.biotac` and three scales ``S`` (N/count) fitted by linear
+  :mod:`slipkit.families.biotac.physics` and three scales ``S`` (N/count) fitted by linear
   regression; the offsets ``o`` absorb the unloaded baseline.
 - :class:`ForceMLP`: a torch multi-layer perceptron trained through skorch with early
   stopping on a validation set; ``hidden=(38,)`` is the 1-layer network of Su et al.
@@ -74,7 +74,7 @@ class WeightedNormalsRegressor(RegressorMixin, BaseEstimator):
     ----------
     normals : array-like of shape (n_electrodes, n_axes) or None
         Electrode unit normals; None: the 19 BioTac normals of
-        :data:`slipkit.physics.biotac.ELECTRODE_NORMALS` (3 axes). The first
+        :data:`slipkit.families.biotac.physics.ELECTRODE_NORMALS` (3 axes). The first
         ``n_electrodes`` columns of ``X`` are the electrodes; further columns (e.g.
         the DC pressure) are ignored by this model.
     fit_intercept : bool

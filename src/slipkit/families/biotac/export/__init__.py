@@ -1,0 +1,6 @@
+"""BioTac's exporters: the force-derivative and pressure-vibration graphs (:mod:`.detectors`)
+and their parity benchmark (:mod:`.parity`)."""
+
+# The export stage first: its import registers every exporter in one order (these modules
+# included), so a module here imported on its own never meets a half-imported sibling.
+import slipkit.export  # noqa: F401
