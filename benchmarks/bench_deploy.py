@@ -503,7 +503,7 @@ def main() -> None:
 
     torch.set_num_threads(1)
     from slipkit.export import export
-    from slipkit.export import force as _force  # noqa: F401
+    from slipkit.families.biotac.export import force as _force  # noqa: F401
     from slipkit.export.commands import export_main
     from slipkit.export.deploy import graph_inputs
     from slipkit.export.parity import estimator_inputs, estimator_score

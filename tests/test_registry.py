@@ -73,7 +73,7 @@ def test_every_plug_in_table_is_a_registry_that_refuses_duplicates() -> None:
     from slipkit.export import deploy, registry
     from slipkit.runtime.preprocessing import OPS
     from slipkit.sim.core import EFFECTS
-    from slipkit.train.tasks.force import ForceRegression
+    from slipkit.train.tasks.detection import StreamDetection
 
     tables = [
         registry._EXPORTERS,
@@ -85,7 +85,7 @@ def test_every_plug_in_table_is_a_registry_that_refuses_duplicates() -> None:
     ]
     assert [True] * 6 == [isinstance(t, Registry) for t in tables]
     with pytest.raises(SlipkitError, match="already registered"):
-        adapters.register_adapter(ForceRegression, lambda view: None)
+        adapters.register_adapter(StreamDetection, lambda view: None)
 
 
 def test_runtime_steps_come_from_the_detector_class_not_the_deployer():

@@ -21,7 +21,6 @@ import importlib as _importlib
 import slipkit.families as _families
 from slipkit.export import detectors as _detectors  # noqa: F401  (registers exporters)
 from slipkit.export import events as _events  # noqa: F401
-from slipkit.export import force as _force  # noqa: F401
 from slipkit.export import frame_gru as _frame_gru  # noqa: F401
 from slipkit.export import generic as _generic  # noqa: F401
 from slipkit.export import sklearn as _sklearn  # noqa: F401

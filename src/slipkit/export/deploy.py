@@ -34,14 +34,6 @@ Per task
     absolute positions of ~10 mm in float32 have ~1e-6 mm resolution, resting pins
     move ~1e-3 mm per frame, and the offset cancels in the velocity
     (``docs/export.md``). Slip class ``slip``; debounce ``task.debounce_k``.
-``ForceRegression``
-    Frame = one electrode frame (window 1, hop 1). With ``baseline: first`` one
-    step, ``baseline_first`` (``frames = task.baseline_frames``): the runtime takes
-    the baseline from the first ``baseline_frames`` frames of the stream (start the
-    loop before contact, as each simulated trial starts at rest; until they have
-    arrived, the median of those that have). A regressor has no classes: the
-    decision is ``score[axis] > threshold`` (N) on the axis and threshold the export
-    config gives (``regression``), recorded without ``classes``.
 ``WindowClassification``
     Frame = one frame of ``task.stream`` (``task.channels``), window ``W`` and hop
     from the task (in frames). Mode ``raw``: no step; ``window``:
@@ -691,76 +683,6 @@ def _deploy_tactip(
     )
 
 
-# -- force regression -------------------------------------------------------------------
-
-
-def _deploy_force(
-    task: Task, run: Run, dataset: Dataset, options: Mapping[str, Any]
-) -> Deployment:
-    from slipkit.train.tasks.force import ForceRegression
-
-    assert isinstance(task, ForceRegression)
-    if task.pdc_stream is not None:
-        raise SlipkitError(
-            "slipkit export: ForceRegression with task.pdc_stream (two input streams "
-            "in one frame) is not deployable yet; train with pdc_stream=null"
-        )
-    stream = task.stream
-    rate = _rate(dataset, stream, options)
-    channels = list(dataset.streams[stream].channels)
-    seed = int(run.config.get("seed", 0))
-    frames = task.frames(dataset)
-    sides, _ = task.sides(dataset, frames, seed=seed)
-    test_rows = set(frames.row[sides.test].tolist())
-    test_trials = list(dict.fromkeys(frames.trial[sides.test].tolist()))
-    trials = trial_frames(dataset, test_trials, stream, channels)
-    # Mark the test-block frames of each trial (rows of the long stream table).
-    table = dataset.stream(stream).reset_index(drop=True)
-    rows_of = table.groupby(table["trial_id"].astype(str), sort=False).indices
-    kept = []
-    for tr in trials:
-        idx = rows_of[tr.trial_id]
-        order = np.argsort(table["t"].to_numpy()[idx], kind="stable")
-        keep = np.isin(idx[order], list(test_rows))
-        kept.append(HeldOutTrial(tr.trial_id, tr.frames, tr.timestamps, keep))
-    axes = list(task.axes)
-    reg = dict(options.get("regression") or {})
-    axis = str(reg.get("axis") or axes[-1])
-    if axis not in axes:
-        raise SlipkitError(
-            f"regression.axis {axis!r} is not one of the task's axes {axes}"
-        )
-    raw_thr = reg.get("threshold")
-    threshold = 0.0 if raw_thr is None else float(raw_thr)
-    steps: list[dict[str, Any]] = []
-    notes = [f"electrode frames of stream {stream!r} (counts), one per model call"]
-    if task.baseline == "first":
-        steps.append(
-            {"op": "baseline_first", "frames": int(task.baseline_frames), "hop": 1}
-        )
-        notes.append(
-            f"baseline: median of the first {int(task.baseline_frames)} frames of the "
-            "stream, subtracted from every frame (start the loop before contact)"
-        )
-    notes.append(
-        f"decision: {axis} > {threshold:g} N (a force estimate has no slip class)"
-    )
-    return Deployment(
-        frame=_frame([stream], channels, 1, 1, rate),
-        preprocessing=steps,
-        export_options={},
-        positive=None,
-        debounce_k=int(options.get("debounce_k") or 1),
-        trials=kept,
-        notes=notes,
-        regression={
-            "axis": axis,
-            "column": axes.index(axis),
-            "threshold": threshold,
-        },
-    )
-
-
 # -- window classification ----------------------------------------------------------------
 
 
@@ -857,12 +779,10 @@ def _deploy_windows(
 
 def _register_builtin() -> None:
     from slipkit.train.tasks.detection import StreamDetection
-    from slipkit.train.tasks.force import ForceRegression
     from slipkit.train.tasks.slip_type import WindowClassification
     from slipkit.train.tasks.tactip import TacTipFrames
 
     register_deployer(TacTipFrames, _deploy_tactip)
-    register_deployer(ForceRegression, _deploy_force)
     register_deployer(WindowClassification, _deploy_windows)
     from slipkit.export.deploy_detection import _deploy_detection
 

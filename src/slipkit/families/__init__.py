@@ -76,7 +76,7 @@ _SLIPTACK_EXPORTERS = tuple(
 _FSR = "slipkit.families.fsr."
 _FSR_EXPORTERS = (_FSR + "export.touch_slip", _FSR + "export.onset")
 _BT = "slipkit.families.biotac."
-_BIOTAC_EXPORTERS = (_BT + "export.detectors",)
+_BIOTAC_EXPORTERS = (_BT + "export.detectors", _BT + "export.force")
 
 FAMILIES: dict[str, Family] = {
     f.name: f
@@ -101,16 +101,15 @@ FAMILIES: dict[str, Family] = {
             name="biotac",
             sensor="biotac",
             tasks=(
-                _T + "force:ForceRegression",
-                _T + "force_direction:FingerDirection",
+                _BT + "force_task:ForceRegression",
+                _BT + "direction_task:FingerDirection",
                 _WINDOWS,
                 _T + "grasp:GraspStability",
                 _DETECT,
             ),
-            deploys=(_T + "force:ForceRegression", _WINDOWS, _DETECT),
-            compares=(_T + "force:ForceRegression", _WINDOWS, _DETECT),
+            deploys=(_BT + "force_task:ForceRegression", _WINDOWS, _DETECT),
+            compares=(_BT + "force_task:ForceRegression", _WINDOWS, _DETECT),
             exporters=(
-                "slipkit.export.force",
                 *_BIOTAC_EXPORTERS,
                 "slipkit.export.window_analytic",
                 "slipkit.export.window_stats",
@@ -202,8 +201,8 @@ PLUGIN_MODULES: dict[str, tuple[str, ...]] = {
         *_FSR_EXPORTERS,
         *_BIOTAC_EXPORTERS,
     ),
-    "deployers": (_ST + "deploy",),
-    "adapters": (_ST + "adapter",),
+    "deployers": (_ST + "deploy", _BT + "deploy"),
+    "adapters": (_ST + "adapter", _BT + "adapter"),
     "scenarios": (_ST + "scenario", _FSR + "scenario", _BT + "scenario"),
     "effects": (_ST + "effects", _FSR + "effects", _BT + "effects"),
     "tasks": (_ST + "task",),

@@ -1,5 +1,5 @@
 """BioTac's exporters: the force-derivative and pressure-vibration graphs (:mod:`.detectors`)
-and their parity benchmark (:mod:`.parity`)."""
+and their parity benchmark (:mod:`.parity`), and the force regressors' graphs (:mod:`.force`)."""
 
 # The export stage first: its import registers every exporter in one order (these modules
 # included), so a module here imported on its own never meets a half-imported sibling.

@@ -13,16 +13,16 @@ from sklearn.metrics import r2_score
 from sklearn.preprocessing import StandardScaler
 from sklearn.utils.estimator_checks import parametrize_with_checks
 
+from slipkit.families.biotac.force import (
+    ForceMLP,
+    LocalLinearRegressor,
+    WeightedNormalsRegressor,
+)
 from slipkit.families.biotac.physics import (
     ELECTRODE_NORMALS,
     linear_drive_matrix,
     weighted_normals_features,
     weighted_normals_scales,
-)
-from slipkit.models.force import (
-    ForceMLP,
-    LocalLinearRegressor,
-    WeightedNormalsRegressor,
 )
 
 torch.set_num_threads(1)
