@@ -104,7 +104,7 @@ FAMILIES: dict[str, Family] = {
                 _BT + "force_task:ForceRegression",
                 _BT + "direction_task:FingerDirection",
                 _WINDOWS,
-                _T + "grasp:GraspStability",
+                _BT + "grasp_task:GraspStability",
                 _DETECT,
             ),
             deploys=(_BT + "force_task:ForceRegression", _WINDOWS, _DETECT),

@@ -27,6 +27,8 @@ OLD_PATHS = [
     ("slipkit.train.tasks.force", "ForceRegression", _BT + "force_task"),
     ("slipkit.train.tasks.force", "FingerDirection", _BT + "direction_task"),
     ("slipkit.train.tasks.force_direction", "FingerDirection", _BT + "direction_task"),
+    ("slipkit.train.tasks.grasp", "GraspStability", _BT + "grasp_task"),
+    ("slipkit.train.tasks.grasp", "GraspFeatures", _BT + "grasp_task"),
 ]
 
 

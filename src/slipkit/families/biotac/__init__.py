@@ -5,7 +5,8 @@ One folder, by role (``docs/extending.md``): :mod:`.physics` (electrode layout a
 backbone's linear response), :mod:`.scene` and :mod:`.effects` (simulated force probes and
 grasp-and-lifts), the slip detectors :mod:`.detectors` (pressure vibration, force
 derivative), the force regressors :mod:`.force`, the tasks :mod:`.force_task` (force
-regression) and :mod:`.direction_task` (finger force direction), the exporters
+regression), :mod:`.direction_task` (finger force direction) and :mod:`.grasp_task`
+(grasp stability from BioTac SP readings), the exporters
 (:mod:`.export`), the force task's deployer (:mod:`.deploy`) and comparison adapter
 (:mod:`.adapter`) and the closed-loop scenario (:mod:`.scenario`). They register through
 ``slipkit.families.PLUGIN_MODULES``. The recordings' importers stay in
