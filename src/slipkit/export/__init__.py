@@ -27,7 +27,6 @@ from slipkit.export import sklearn as _sklearn  # noqa: F401
 from slipkit.export import svm as _svm  # noqa: F401
 from slipkit.export import tactip_detector as _tactip_detector  # noqa: F401
 from slipkit.export import torch as _torch  # noqa: F401
-from slipkit.export import window_analytic as _window_analytic  # noqa: F401
 from slipkit.export import window_stats as _window_stats  # noqa: F401
 from slipkit.export.parity import check_parity
 from slipkit.export.pins import export_velocity_features

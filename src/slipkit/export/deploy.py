@@ -45,9 +45,11 @@ Per task
     decided class the runtime counts, and any slip class is a slip decision. With
     ``task.folds`` the run scored the model on its outer folds and then refit it on
     every trial: ``refit_on_all_data`` is true and no trial is held out from it.
-    The analytic window rules (``export/window_analytic.py``) keep no input width:
-    the exporter gets the window (``n_frames``); the DoS electrode energy decides
-    touch against its one motion class, which is then the slip class.
+    An analytic window rule (:func:`register_window_rule`, e.g. BioTac's in
+    ``families/biotac/export/window_rules.py``) keeps no input width: the exporter gets
+    the window (``n_frames``); a rule may name its bundle's slip classes (the DoS
+    electrode energy decides touch against its one motion class, which is then the
+    slip class).
 ``StreamDetection``
     Frame = one raw sample of ``task.stream`` (``task.channels``); window and hop are
     what the detector's graph needs (:class:`slipkit.export.detectors.DetectorGraph`,
@@ -324,6 +326,23 @@ _DEPLOYERS: Registry[type, Deployer] = Registry(
 def register_deployer(cls: type, fn: Deployer, *, overwrite: bool = False) -> None:
     """Register ``fn(task, run, dataset, options) -> Deployment`` for task class ``cls``."""
     _DEPLOYERS.register(cls, fn, overwrite=overwrite)
+
+
+#: how the window deployer treats an analytic window rule's model, by estimator class: the
+#: rule's slip classes (``fn(model) -> list of str or None``; None: the default choice)
+_WINDOW_RULES: Registry[type, Callable[[Any], list[str] | None]] = Registry(
+    "window rule", error=SlipkitError, n_args=1, key_type=type
+)
+
+
+def register_window_rule(
+    cls: type, slip_classes: Callable[[Any], list[str] | None] = lambda model: None
+) -> None:
+    """Register estimator class ``cls`` as an analytic window rule: the window deployer
+    passes its exporter the window length (``n_frames``: the rule keeps no input width)
+    and takes the bundle's slip classes from ``slip_classes(model)`` unless the export
+    config names them."""
+    _WINDOW_RULES.register(cls, slip_classes)
 
 
 def deployer_for(task: Task) -> Deployer:
@@ -730,14 +749,11 @@ def _deploy_windows(
             f"run {run.path}: the saved {type(run.model).__name__} has no classes_ "
             "(not a fitted classifier)"
         )
-    from slipkit.export.window_analytic import (
-        deploy_export_options,
-        deploy_slip_classes,
-    )
-
-    # A direction-blind analytic rule (the DoS electrode energy) decides between touch
-    # and its one motion class only: that class is slip unless the config names others.
-    rule_slip = deploy_slip_classes(run.model)
+    # An analytic window rule may decide fewer classes than classes_ (the DoS electrode
+    # energy: touch against its one motion class): its slip classes unless the config
+    # names others.
+    rule = _WINDOW_RULES.for_class(type(run.model))
+    rule_slip = None if rule is None else rule(run.model)
     if rule_slip is not None and not (
         options.get("slip_classes") or options.get("positive")
     ):
@@ -757,7 +773,7 @@ def _deploy_windows(
         frame=_frame([stream], channels, width, hop, rate),
         preprocessing=steps,
         # the analytic window rules keep no input width: their exporters take n_frames
-        export_options=deploy_export_options(run.model, width),
+        export_options={} if rule is None else {"n_frames": int(width)},
         positive=positive,
         debounce_k=int(options.get("debounce_k") or 1),
         trials=trials,
@@ -804,6 +820,7 @@ __all__ = [
     "graph_inputs",
     "held_out_inputs",
     "register_deployer",
+    "register_window_rule",
     "slip_decisions",
     "trial_classes",
 ]

@@ -76,7 +76,9 @@ _SLIPTACK_EXPORTERS = tuple(
 _FSR = "slipkit.families.fsr."
 _FSR_EXPORTERS = (_FSR + "export.touch_slip", _FSR + "export.onset")
 _BT = "slipkit.families.biotac."
-_BIOTAC_EXPORTERS = (_BT + "export.detectors", _BT + "export.force")
+_BIOTAC_EXPORTERS = tuple(
+    f"{_BT}export.{m}" for m in ("detectors", "force", "window_rules")
+)
 
 FAMILIES: dict[str, Family] = {
     f.name: f
@@ -111,7 +113,6 @@ FAMILIES: dict[str, Family] = {
             compares=(_BT + "force_task:ForceRegression", _WINDOWS, _DETECT),
             exporters=(
                 *_BIOTAC_EXPORTERS,
-                "slipkit.export.window_analytic",
                 "slipkit.export.window_stats",
                 "slipkit.export.generic",
                 "slipkit.export.frame_gru",
@@ -125,7 +126,9 @@ FAMILIES: dict[str, Family] = {
                 "models/force.md",
                 "models/slip_type.md",
             ),
-            detectors=(_BT + "detectors",),
+            detectors=tuple(
+                _BT + m for m in ("detectors", "slip_twist", "electrode_energy")
+            ),
         ),
         Family(
             name="fsr",

@@ -29,6 +29,12 @@ OLD_PATHS = [
     ("slipkit.train.tasks.force_direction", "FingerDirection", _BT + "direction_task"),
     ("slipkit.train.tasks.grasp", "GraspStability", _BT + "grasp_task"),
     ("slipkit.train.tasks.grasp", "GraspFeatures", _BT + "grasp_task"),
+    ("slipkit.baselines.slip_type", "SlipTwistClassifier", _BT + "slip_twist"),
+    (
+        "slipkit.baselines.window_energy",
+        "ElectrodeEnergyClassifier",
+        _BT + "electrode_energy",
+    ),
 ]
 
 
