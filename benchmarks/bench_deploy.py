@@ -503,10 +503,10 @@ def main() -> None:
 
     torch.set_num_threads(1)
     from slipkit.export import export
-    from slipkit.export import force as _force  # noqa: F401
     from slipkit.export.commands import export_main
     from slipkit.export.deploy import graph_inputs
     from slipkit.export.parity import estimator_inputs, estimator_score
+    from slipkit.families.biotac.export import force as _force  # noqa: F401
     from slipkit.runtime import StreamLoop, load_bundle
     from slipkit.train.commands import train_main
     from slipkit.train.runs import read_run

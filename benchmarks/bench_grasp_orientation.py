@@ -42,7 +42,7 @@ from sklearn.svm import SVC
 
 from slipkit.data.importers.bts3v2 import read_bts3v2
 from slipkit.data.splits import split_by_group
-from slipkit.train.tasks.grasp import GraspStability, grasp_pipeline
+from slipkit.families.biotac.grasp_task import GraspStability, grasp_pipeline
 
 ORIENTATIONS = ("palm_down", "palm_side", "palm_45")
 #: The configs' defaults (configs/model/grasp_*.yaml).

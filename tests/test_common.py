@@ -37,6 +37,7 @@ _NET = {"max_epochs": 10, "lr": 0.1, "batch_size": 64, "patience": 2}
 
 #: constructor arguments where the defaults describe one sensor's layout
 PARAMS: dict[str, dict[str, Any]] = {
+    "GraspFeatures": {"n_electrodes": 1, "n_fingers": 1},
     "WindowCNN": {"n_channels": 1, "filters": 4, "kernel_size": 3, **_NET},
     "WindowGRU": {"n_channels": 1, **_NET},
     "WindowMLP": {"hidden_units": 8, **_NET},
@@ -66,6 +67,7 @@ REASONS: dict[str, str] = {
     "ForceDerivative": "reads Ft (1 channel) or (Fx, Fy) (2 channels)",
     "FrameGRUDetector": "calibrates its threshold on slip (1) and no-slip (0) samples; the checks' labels are other classes",
     "PinContactDetector": "reads pin frames as x/y pairs (an even channel count) over its window, and slip/no-slip labels",
+    "GraspFeatures": "reads electrode columns then at least one one-hot orientation column",
     "PinDivergenceDetector": "reads pin frames as x/y pairs (an even channel count) over its window, and slip/no-slip labels",
     "PinMotionDetector": "reads pin frames as x/y pairs (an even channel count) and slip/no-slip labels",
     "PressureVibration": "reads one pressure channel",
@@ -412,6 +414,7 @@ EXPECTED: dict[str, dict[str, str]] = {
         "check_requires_y_none",
         "check_supervised_y_2d",
     ),
+    "GraspFeatures": _because(REASONS["GraspFeatures"], "check_fit2d_1feature"),
     "ForceDerivative": _because(
         REASONS["ForceDerivative"],
         "check_classifier_data_not_an_array",

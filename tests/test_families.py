@@ -144,7 +144,7 @@ def test_family_detector_modules_train_in_the_detector_slot() -> None:
     fsr = "slipkit.families.fsr."
     assert detector_module(fsr + "touch_slip")
     assert detector_module(fsr + "onset")
-    assert detector_module("slipkit.baselines.biotac")
+    assert detector_module("slipkit.families.biotac.detectors")
     assert detector_module("slipkit.families.sliptack.speed")
     assert not detector_module("slipkit.families.sliptack.spectral")
     assert not detector_module(fsr + "export.touch_slip")

@@ -12,7 +12,7 @@ MOVED = [
     (
         "slipkit.train.tasks.force",
         "FingerDirection",
-        "slipkit.train.tasks.force_direction",
+        "slipkit.families.biotac.direction_task",
     ),
 ]
 

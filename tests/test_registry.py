@@ -66,26 +66,32 @@ def test_for_class_walks_the_mro() -> None:
 
 def test_every_plug_in_table_is_a_registry_that_refuses_duplicates() -> None:
     """Exporters, deployers, comparison adapters, effects, scenarios and runtime ops share
-    the one registry type; a different adapter for a registered task class is refused."""
+    the one registry type; a different adapter for a registered task class, or a
+    different window rule for a registered rule class, is refused."""
     from slipkit.closedloop.scenarios import SCENARIOS
     from slipkit.compare import adapters
     from slipkit.errors import SlipkitError
     from slipkit.export import deploy, registry
     from slipkit.runtime.preprocessing import OPS
     from slipkit.sim.core import EFFECTS
-    from slipkit.train.tasks.force import ForceRegression
+    from slipkit.train.tasks.detection import StreamDetection
 
     tables = [
         registry._EXPORTERS,
         deploy._DEPLOYERS,
+        deploy._WINDOW_RULES,
         adapters._ADAPTERS,
         EFFECTS,
         SCENARIOS,
         OPS,
     ]
-    assert [True] * 6 == [isinstance(t, Registry) for t in tables]
+    assert [True] * 7 == [isinstance(t, Registry) for t in tables]
     with pytest.raises(SlipkitError, match="already registered"):
-        adapters.register_adapter(ForceRegression, lambda view: None)
+        adapters.register_adapter(StreamDetection, lambda view: None)
+    from slipkit.families.biotac.slip_twist import SlipTwistClassifier
+
+    with pytest.raises(SlipkitError, match="already registered"):
+        deploy.register_window_rule(SlipTwistClassifier, lambda model: ["1"])
 
 
 def test_runtime_steps_come_from_the_detector_class_not_the_deployer():
@@ -93,7 +99,6 @@ def test_runtime_steps_come_from_the_detector_class_not_the_deployer():
     registered beside their graphs; a class without an entry gets no step; a second
     registration is refused."""
     import slipkit.export  # noqa: F401  (registers every family's exporters)
-    from slipkit.baselines.biotac import PressureVibration
     from slipkit.export.registry import (
         _RUNTIME_STEPS,
         ExportError,
@@ -102,6 +107,7 @@ def test_runtime_steps_come_from_the_detector_class_not_the_deployer():
         register_runtime_steps,
         runtime_steps,
     )
+    from slipkit.families.biotac.detectors import PressureVibration
     from slipkit.families.fsr.onset import FSROnset, FSROnsetLogistic
     from slipkit.families.fsr.touch_slip import FSRTouchSlip
 

@@ -10,8 +10,8 @@ import pytest
 from hydra import compose, initialize_config_dir
 
 from slipkit import config_dir
-from slipkit.baselines.window_energy import ElectrodeEnergyClassifier
 from slipkit.compare.commands import compare_main
+from slipkit.families.biotac.electrode_energy import ElectrodeEnergyClassifier
 from slipkit.families.davis.classifier import EventFrameClassifier
 from slipkit.families.sliptack.spectral import SpectralSpeedRegressor
 
@@ -117,7 +117,7 @@ def test_dos_real_energy_floor_beside_a_learned_window_model(
     kinds = dict(zip(df["estimator"], df["kind"], strict=True))
     assert {"window_mlp": "learned", "energy": "analytic"} == kinds
     exports = dict(zip(df["estimator"], df["export"], strict=True))
-    # a touch-vs-motion graph (export/window_analytic.py)
+    # a touch-vs-motion graph (families/biotac/export/window_rules.py)
     assert "ok" == exports["energy"]
 
 
@@ -243,7 +243,7 @@ def test_biotac_slip_type_holds_the_twist_rule_beside_the_window_nets() -> None:
     assert "biotac_lift_slip_hard" == comp.scene.name
     assert ["twist"] == list(comp.analytic)
     assert (
-        "slipkit.baselines.slip_type.SlipTwistClassifier"
+        "slipkit.families.biotac.slip_twist.SlipTwistClassifier"
         == comp.estimators.twist._target_
     )
     assert {"window_mlp", "window_cnn"} == set(comp.estimators) - set(comp.analytic)

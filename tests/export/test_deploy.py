@@ -16,10 +16,10 @@ from omegaconf import DictConfig
 from slipkit import config_dir
 from slipkit.errors import SlipkitError
 from slipkit.export import export
-from slipkit.export import force as _force  # noqa: F401  (registers the force exporters)
 from slipkit.export.commands import deploy_config, export_main
 from slipkit.export.deploy import graph_inputs, slip_decisions
 from slipkit.export.parity import estimator_score
+from slipkit.families.biotac.export import force as _force  # noqa: F401  (registers the force exporters)
 from slipkit.runtime import StreamLoop, load_bundle
 from slipkit.train.commands import train_main
 from slipkit.train.runs import read_run

@@ -9,12 +9,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from slipkit.export import check_parity, export
-from slipkit.export import force as _force  # noqa: F401  (registers the force exporters)
 from slipkit.export.deploy import decision_ends, graph_inputs
+from slipkit.families.biotac.export import force as _force  # noqa: F401  (registers the force exporters)
+from slipkit.families.biotac.force import LocalLinearRegressor, WeightedNormalsRegressor
+from slipkit.families.biotac.force_task import _first_frames_median
 from slipkit.features.windows import sliding_windows
-from slipkit.models.force import LocalLinearRegressor, WeightedNormalsRegressor
 from slipkit.runtime.preprocessing import Pipeline
-from slipkit.train.tasks.force import _first_frames_median
 
 
 def _force_data(n: int = 400, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:

@@ -15,7 +15,6 @@ from hypothesis.extra.numpy import arrays
 from scipy.signal import butter, sosfilt, sosfilt_zi
 
 from slipkit import config_dir
-from slipkit.baselines.biotac import ForceDerivative, PressureVibration
 from slipkit.data import Dataset
 from slipkit.export import ExportError, exporter_for
 from slipkit.export.detectors import (
@@ -23,14 +22,17 @@ from slipkit.export.detectors import (
     DetectorGraph,
     check_detector_parity,
     detector_windows,
-    export_force_derivative,
-    export_pressure_vibration,
     graph_scores,
-    pressure_baseline,
     steady_state_fir,
 )
 from slipkit.export.parity import onnx_session
 from slipkit.export.registry import IR_VERSION
+from slipkit.families.biotac.detectors import ForceDerivative, PressureVibration
+from slipkit.families.biotac.export.detectors import (
+    export_force_derivative,
+    export_pressure_vibration,
+    pressure_baseline,
+)
 from slipkit.families.fsr.export.touch_slip import export_fsr_touch_slip
 from slipkit.families.fsr.touch_slip import FSRTouchSlip
 from slipkit.families.sliptack.export.torsion import export_torsional_slip
@@ -40,7 +42,7 @@ from slipkit.sim.commands import build_scene
 Arr = np.ndarray
 
 
-# -- simulated recordings (as tests/families/fsr/test_touch_slip.py and test_biotac_detectors.py) --
+# -- simulated recordings (as tests/families/fsr/test_touch_slip.py and tests/families/biotac/test_detectors.py) --
 @lru_cache(maxsize=4)
 def simulated(scene: str, n: int, seed: int) -> Dataset:
     """``n`` trials of ``scene`` from its real config."""

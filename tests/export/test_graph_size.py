@@ -11,18 +11,18 @@ import pytest
 from tests.runtime.helpers import linear_graph, manifest
 
 from slipkit.export import check_parity, export
-from slipkit.export import force as _force  # noqa: F401  (registers the force exporters)
 from slipkit.export.parity import onnx_session
 from slipkit.export.torch import find_torch_parts, fold_standardisation
-from slipkit.families.fsr.export.touch_slip import export_fsr_touch_slip
-from slipkit.families.fsr.touch_slip import FSRTouchSlip
-from slipkit.families.sliptack.export.speed import export_stick_slip_speed
-from slipkit.families.sliptack.speed import StickSlipSpeed
-from slipkit.models.force import (
+from slipkit.families.biotac.export import force as _force  # noqa: F401  (registers the force exporters)
+from slipkit.families.biotac.force import (
     ForceMLP,
     LocalLinearRegressor,
     WeightedNormalsRegressor,
 )
+from slipkit.families.fsr.export.touch_slip import export_fsr_touch_slip
+from slipkit.families.fsr.touch_slip import FSRTouchSlip
+from slipkit.families.sliptack.export.speed import export_stick_slip_speed
+from slipkit.families.sliptack.speed import StickSlipSpeed
 from slipkit.runtime import StreamLoop, load_bundle, write_bundle
 from slipkit.runtime.preprocessing import Pipeline
 

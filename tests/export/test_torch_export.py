@@ -144,7 +144,7 @@ def test_duck_typed_estimator_gets_input_and_output_scaling(frames):
 
 def test_slipkit_force_and_window_networks_export_with_parity(frames):
     """ForceMLP (y de-standardised) and WindowCNN (probabilities) pass parity through the generic path."""
-    from slipkit.models.force import ForceMLP
+    from slipkit.families.biotac.force import ForceMLP
     from slipkit.models.window import WindowCNN
 
     X, y, Y = frames

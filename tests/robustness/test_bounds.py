@@ -14,8 +14,8 @@ import pytest
 from omegaconf import OmegaConf
 
 from slipkit.cli import main
-from slipkit.closedloop import biotac
 from slipkit.errors import SlipkitError
+from slipkit.families.biotac import scenario as biotac
 from slipkit.families.fsr import scenario as fsr
 from slipkit.families.sliptack import scenario as sliptack
 from slipkit.families.tactip import scenario as tactip

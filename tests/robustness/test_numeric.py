@@ -17,7 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from slipkit.evaluate.metrics import regression_metrics
-from slipkit.models.force import (
+from slipkit.families.biotac.force import (
     ForceMLP,
     LocalLinearRegressor,
     WeightedNormalsRegressor,

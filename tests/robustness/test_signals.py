@@ -12,8 +12,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from slipkit.baselines.biotac import ForceDerivative, PressureVibration
 from slipkit.errors import SlipkitError
+from slipkit.families.biotac.detectors import ForceDerivative, PressureVibration
 from slipkit.families.davis.polarity import DavisPolarity
 from slipkit.families.fsr.touch_slip import FSRTouchSlip
 from slipkit.families.sliptack.accel import DropAcceleration

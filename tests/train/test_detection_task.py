@@ -13,10 +13,10 @@ from hydra import compose, initialize_config_dir
 from tests.strategies import make_dataset
 
 from slipkit import config_dir
-from slipkit.baselines.biotac import ForceDerivative
 from slipkit.data import save_dataset
 from slipkit.data.dataset import Dataset, LabelSpec, StreamSpec, Trial
 from slipkit.errors import SlipkitError
+from slipkit.families.biotac.detectors import ForceDerivative
 from slipkit.sim.commands import build_scene
 from slipkit.train.commands import evaluate_main, train_main
 from slipkit.train.tasks.detection import Recordings, StreamDetection

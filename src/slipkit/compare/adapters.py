@@ -514,29 +514,6 @@ def _detector_window(model: Any) -> int:
     return own if isinstance(own, int) else 1
 
 
-# -- force regression ---------------------------------------------------------------------
-
-
-def adapt_force(view: RunView) -> Evaluation:
-    """BioTac force (N) per axis (:class:`~slipkit.train.tasks.force.ForceRegression`)."""
-    m = view.metrics
-    test = m["test"]
-    row: dict[str, Any] = {
-        "rmse": float(test["rmse_mean"]),
-        "smse": float(test["smse_mean"]),
-        "window_frames": 1,
-        "decision_frames": 1,
-    }
-    for axis, v in test["rmse"].items():
-        row[f"rmse_{axis}"] = float(v)
-    for axis, v in test["smse"].items():
-        row[f"smse_{axis}"] = float(v)
-    task: Any = view.task
-    rate = view.dataset.streams[task.stream].rate_hz
-    row["window_ms"] = 1000.0 / float(rate) if rate else math.nan
-    return Evaluation(row=row, split=m["split"])
-
-
 #: the trial-event columns a detection task's operating point gives a row
 EVENT_COLUMNS = (
     "detected_rate",
@@ -570,12 +547,10 @@ def event_row(op: Mapping[str, Any], source: str) -> dict[str, Any]:
 
 def _register_builtin() -> None:
     from slipkit.train.tasks.detection import StreamDetection
-    from slipkit.train.tasks.force import ForceRegression
     from slipkit.train.tasks.slip_type import WindowClassification
 
     register_adapter(WindowClassification, adapt_windows)
     register_adapter(StreamDetection, adapt_detection)
-    register_adapter(ForceRegression, adapt_force)
 
 
 _register_builtin()

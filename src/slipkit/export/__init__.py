@@ -20,12 +20,10 @@ import importlib as _importlib
 
 import slipkit.families as _families
 from slipkit.export import detectors as _detectors  # noqa: F401  (registers exporters)
-from slipkit.export import force as _force  # noqa: F401
 from slipkit.export import frame_gru as _frame_gru  # noqa: F401
 from slipkit.export import generic as _generic  # noqa: F401
 from slipkit.export import sklearn as _sklearn  # noqa: F401
 from slipkit.export import torch as _torch  # noqa: F401
-from slipkit.export import window_analytic as _window_analytic  # noqa: F401
 from slipkit.export import window_stats as _window_stats  # noqa: F401
 from slipkit.export.parity import check_parity
 from slipkit.export.pins import export_velocity_features

@@ -280,7 +280,6 @@ def _replay_sample(
 def export_main(cfg: DictConfig) -> Path:
     """Export the run ``cfg.run`` as a bundle; print the bundle folder last and return it."""
     from slipkit.export import export  # registers the built-in exporters
-    from slipkit.export import force as _force  # noqa: F401  (registers force exporters)
     from slipkit.export.deploy import deployment, held_out_inputs
     from slipkit.export.detectors import DetectorGraph
     from slipkit.export.frame_gru import StepGraph

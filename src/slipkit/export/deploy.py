@@ -29,14 +29,6 @@ Per task
 Family folders' deployers document their own tasks (e.g. TacTip's frame task in
 ``slipkit.families.tactip.deploy``).
 
-``ForceRegression``
-    Frame = one electrode frame (window 1, hop 1). With ``baseline: first`` one
-    step, ``baseline_first`` (``frames = task.baseline_frames``): the runtime takes
-    the baseline from the first ``baseline_frames`` frames of the stream (start the
-    loop before contact, as each simulated trial starts at rest; until they have
-    arrived, the median of those that have). A regressor has no classes: the
-    decision is ``score[axis] > threshold`` (N) on the axis and threshold the export
-    config gives (``regression``), recorded without ``classes``.
 ``WindowClassification``
     Frame = one frame of ``task.stream`` (``task.channels``), window ``W`` and hop
     from the task (in frames). Mode ``raw``: no step; ``window``:
@@ -48,9 +40,11 @@ Family folders' deployers document their own tasks (e.g. TacTip's frame task in
     decided class the runtime counts, and any slip class is a slip decision. With
     ``task.folds`` the run scored the model on its outer folds and then refit it on
     every trial: ``refit_on_all_data`` is true and no trial is held out from it.
-    The analytic window rules (``export/window_analytic.py``) keep no input width:
-    the exporter gets the window (``n_frames``); the DoS electrode energy decides
-    touch against its one motion class, which is then the slip class.
+    An analytic window rule (:func:`register_window_rule`, e.g. BioTac's in
+    ``families/biotac/export/window_rules.py``) keeps no input width: the exporter gets
+    the window (``n_frames``); a rule may name its bundle's slip classes (the DoS
+    electrode energy decides touch against its one motion class, which is then the
+    slip class).
 ``StreamDetection``
     Frame = one raw sample of ``task.stream`` (``task.channels``); window and hop are
     what the detector's graph needs (:class:`slipkit.export.detectors.DetectorGraph`,
@@ -317,6 +311,23 @@ _DEPLOYERS: Registry[type, Deployer] = Registry(
 def register_deployer(cls: type, fn: Deployer, *, overwrite: bool = False) -> None:
     """Register ``fn(task, run, dataset, options) -> Deployment`` for task class ``cls``."""
     _DEPLOYERS.register(cls, fn, overwrite=overwrite)
+
+
+#: how the window deployer treats an analytic window rule's model, by estimator class: the
+#: rule's slip classes (``fn(model) -> list of str or None``; None: the default choice)
+_WINDOW_RULES: Registry[type, Callable[[Any], list[str] | None]] = Registry(
+    "window rule", error=SlipkitError, n_args=1, key_type=type
+)
+
+
+def register_window_rule(
+    cls: type, slip_classes: Callable[[Any], list[str] | None] = lambda model: None
+) -> None:
+    """Register estimator class ``cls`` as an analytic window rule: the window deployer
+    passes its exporter the window length (``n_frames``: the rule keeps no input width)
+    and takes the bundle's slip classes from ``slip_classes(model)`` unless the export
+    config names them."""
+    _WINDOW_RULES.register(cls, slip_classes)
 
 
 def deployer_for(task: Task) -> Deployer:
@@ -615,76 +626,6 @@ def _frame(
     }
 
 
-# -- force regression -------------------------------------------------------------------
-
-
-def _deploy_force(
-    task: Task, run: Run, dataset: Dataset, options: Mapping[str, Any]
-) -> Deployment:
-    from slipkit.train.tasks.force import ForceRegression
-
-    assert isinstance(task, ForceRegression)
-    if task.pdc_stream is not None:
-        raise SlipkitError(
-            "slipkit export: ForceRegression with task.pdc_stream (two input streams "
-            "in one frame) is not deployable yet; train with pdc_stream=null"
-        )
-    stream = task.stream
-    rate = _rate(dataset, stream, options)
-    channels = list(dataset.streams[stream].channels)
-    seed = int(run.config.get("seed", 0))
-    frames = task.frames(dataset)
-    sides, _ = task.sides(dataset, frames, seed=seed)
-    test_rows = set(frames.row[sides.test].tolist())
-    test_trials = list(dict.fromkeys(frames.trial[sides.test].tolist()))
-    trials = trial_frames(dataset, test_trials, stream, channels)
-    # Mark the test-block frames of each trial (rows of the long stream table).
-    table = dataset.stream(stream).reset_index(drop=True)
-    rows_of = table.groupby(table["trial_id"].astype(str), sort=False).indices
-    kept = []
-    for tr in trials:
-        idx = rows_of[tr.trial_id]
-        order = np.argsort(table["t"].to_numpy()[idx], kind="stable")
-        keep = np.isin(idx[order], list(test_rows))
-        kept.append(HeldOutTrial(tr.trial_id, tr.frames, tr.timestamps, keep))
-    axes = list(task.axes)
-    reg = dict(options.get("regression") or {})
-    axis = str(reg.get("axis") or axes[-1])
-    if axis not in axes:
-        raise SlipkitError(
-            f"regression.axis {axis!r} is not one of the task's axes {axes}"
-        )
-    raw_thr = reg.get("threshold")
-    threshold = 0.0 if raw_thr is None else float(raw_thr)
-    steps: list[dict[str, Any]] = []
-    notes = [f"electrode frames of stream {stream!r} (counts), one per model call"]
-    if task.baseline == "first":
-        steps.append(
-            {"op": "baseline_first", "frames": int(task.baseline_frames), "hop": 1}
-        )
-        notes.append(
-            f"baseline: median of the first {int(task.baseline_frames)} frames of the "
-            "stream, subtracted from every frame (start the loop before contact)"
-        )
-    notes.append(
-        f"decision: {axis} > {threshold:g} N (a force estimate has no slip class)"
-    )
-    return Deployment(
-        frame=_frame([stream], channels, 1, 1, rate),
-        preprocessing=steps,
-        export_options={},
-        positive=None,
-        debounce_k=int(options.get("debounce_k") or 1),
-        trials=kept,
-        notes=notes,
-        regression={
-            "axis": axis,
-            "column": axes.index(axis),
-            "threshold": threshold,
-        },
-    )
-
-
 # -- window classification ----------------------------------------------------------------
 
 
@@ -732,14 +673,11 @@ def _deploy_windows(
             f"run {run.path}: the saved {type(run.model).__name__} has no classes_ "
             "(not a fitted classifier)"
         )
-    from slipkit.export.window_analytic import (
-        deploy_export_options,
-        deploy_slip_classes,
-    )
-
-    # A direction-blind analytic rule (the DoS electrode energy) decides between touch
-    # and its one motion class only: that class is slip unless the config names others.
-    rule_slip = deploy_slip_classes(run.model)
+    # An analytic window rule may decide fewer classes than classes_ (the DoS electrode
+    # energy: touch against its one motion class): its slip classes unless the config
+    # names others.
+    rule = _WINDOW_RULES.for_class(type(run.model))
+    rule_slip = None if rule is None else rule(run.model)
     if rule_slip is not None and not (
         options.get("slip_classes") or options.get("positive")
     ):
@@ -759,7 +697,7 @@ def _deploy_windows(
         frame=_frame([stream], channels, width, hop, rate),
         preprocessing=steps,
         # the analytic window rules keep no input width: their exporters take n_frames
-        export_options=deploy_export_options(run.model, width),
+        export_options={} if rule is None else {"n_frames": int(width)},
         positive=positive,
         debounce_k=int(options.get("debounce_k") or 1),
         trials=trials,
@@ -781,10 +719,8 @@ def _deploy_windows(
 
 def _register_builtin() -> None:
     from slipkit.train.tasks.detection import StreamDetection
-    from slipkit.train.tasks.force import ForceRegression
     from slipkit.train.tasks.slip_type import WindowClassification
 
-    register_deployer(ForceRegression, _deploy_force)
     register_deployer(WindowClassification, _deploy_windows)
     from slipkit.export.deploy_detection import _deploy_detection
 
@@ -804,6 +740,7 @@ __all__ = [
     "graph_inputs",
     "held_out_inputs",
     "register_deployer",
+    "register_window_rule",
     "slip_decisions",
     "trial_classes",
 ]

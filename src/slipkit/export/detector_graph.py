@@ -139,6 +139,11 @@ def _axes(g: GraphBuilder, *axes: int) -> str:
     return g.const(list(axes), np.int64, stem="axes")
 
 
+def _band_matrix(g: GraphBuilder, v: str, m: NDArray[np.float64]) -> str:
+    # The band-pass as one MatMul: ~W x n_out multiply-adds, one BLAS call in onnxruntime.
+    return g.op("MatMul", v, g.const(m, np.float64), stem="band")
+
+
 def _not_finite(g: GraphBuilder, v: str) -> str:
     # v - v is NaN exactly for NaN and +-inf (the trick slipkit.export.pins uses).
     return g.op("IsNaN", g.op("Sub", v, v), stem="not_finite")

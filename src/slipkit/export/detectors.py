@@ -1,11 +1,11 @@
-"""Exporters of the analytic detectors whose math ONNX can express: a window in, the score out.
+"""The analytic detectors' graph contract: a window in, the score out.
 
 The code lives in one module per piece: :mod:`~slipkit.export.detector_graph` (the graph type
-and shared pieces), :mod:`~slipkit.export.biotac_detectors`,
-:mod:`~slipkit.export.detector_parity`; this module registers
-their exporters, re-exports their names and runs the parity benchmark
-(``python -m slipkit.export.detectors``). Family folders export their detectors with the same
-pieces (``slipkit/families/<family>/export/``, e.g. the FSR touch-and-slip graph).
+and shared pieces) and :mod:`~slipkit.export.detector_parity`; this module re-exports their
+names and holds the parity benchmark's helpers (:func:`print_parity_rows`). Family folders
+export their detectors with these pieces (``slipkit/families/<family>/export/``, e.g. the
+BioTac force-derivative and pressure-vibration graphs, the FSR touch-and-slip graph) and
+print their parity with ``python -m slipkit.families.<family>.export.parity``.
 
 Every graph takes a window of the last ``W`` raw samples, shape ``(batch, W,
 n_channels)`` float32, oldest first (what the runtime's ring buffer holds), and
@@ -20,14 +20,6 @@ the only rounding that differs from the batch detector is the float32 input. The
 graphs instead read the float64 window itself, shape ``(batch, W)`` (one channel), and
 return a float64 score: no cast nodes, no float32 rounding.
 
-* :class:`~slipkit.baselines.biotac.ForceDerivative` -- ``W = span + 1`` (4):
-  ``Ft = sqrt(fx^2 + fy^2)`` (or ``Ft`` itself) at both ends, ``-(Ft[-1] - Ft[0])
-  rate / span``; the same numbers as the batch detector.
-* :class:`~slipkit.baselines.biotac.PressureVibration` -- the IIR band-pass as one
-  MatMul over ``W = L + window - 1`` samples (:func:`steady_state_fir`), rectify,
-  ``TopK`` for the ``n_exceed``-th largest of the last ``window`` outputs, over a
-  **fixed baseline** (the detector's ``baseline`` option).
-
 Windowed IIR filters (:func:`steady_state_fir`): the graph filters its window with
 the state a constant input equal to the window's first sample would leave
 (``sosfilt_zi``), which is what the batch detector does at a recording's start.
@@ -40,8 +32,8 @@ smallest length with ``T(L) <= tail_tol``.
 Parity (:func:`check_detector_parity`) compares the graph on the windows the runtime
 feeds (float32, float64 for FSR) with
 the batch detector on the recordings, at the instants the runtime would call it;
-``python -m slipkit.export.detectors`` prints it (and the time per call) for every
-detector on simulated recordings.
+each family's ``python -m slipkit.families.<family>.export.parity`` prints it (and the
+time per call) for its detectors on simulated recordings.
 
 Where the detector scores ``-inf`` (cannot decide: warm-up, untouched, missing
 data) a graph scores :data:`NO_SCORE`, the lowest float32 (below any threshold),
@@ -68,17 +60,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slipkit.baselines.base import StreamDetector
-from slipkit.baselines.biotac import ForceDerivative, PressureVibration
-from slipkit.export.biotac_detectors import (  # noqa: F401
-    _band_matrix,
-    _reduce_min,
-    baseline_agreement,
-    export_force_derivative,
-    export_pressure_vibration,
-    pressure_baseline,
-    pressure_runtime_steps,
-    with_fixed_baseline,
-)
 from slipkit.export.detector_graph import (  # noqa: F401
     _F32_MAX,
     _MAX_TAPS,
@@ -88,6 +69,7 @@ from slipkit.export.detector_graph import (  # noqa: F401
     WINDOW_INPUT,
     DetectorGraph,
     _axes,
+    _band_matrix,
     _finish,
     _graph,
     _not_finite,
@@ -101,10 +83,6 @@ from slipkit.export.detector_parity import (  # noqa: F401
     graph_scores,
 )
 from slipkit.export.parity import onnx_session
-from slipkit.export.registry import (
-    register_exporter,
-    register_runtime_steps,
-)
 
 
 def _simulate(scene: str, n: int, seed: int) -> Any:
@@ -133,42 +111,6 @@ def _stack(
             ys.append((df["t"].to_numpy() >= tr.labels[label]).astype(int))
         segs.append(np.full(len(df), k))
     return np.concatenate(xs), np.concatenate(ys), np.concatenate(segs)
-
-
-def main() -> None:
-    """Print parity and per-call time of every detector graph on simulated recordings.
-
-    ``python -m slipkit.export.detectors``: thresholds fitted on 3 trials, parity
-    (:func:`check_detector_parity`) on 3 other trials; time = median of 2000
-    batch-1 onnxruntime calls (one thread) on held-out windows (the SlipTack torsional
-    detector's row: ``python -m slipkit.families.sliptack.export.torsion``).
-    """
-    rows: list[tuple[str, StreamDetector, DetectorGraph, Any, Any]] = []
-    fit_ds, held = (
-        _simulate("biotac_lift_slip", 3, 5),
-        _simulate("biotac_lift_slip", 3, 6),
-    )
-    X, y, seg = _stack(fit_ds, "truth_force", ["fx", "fy"], "slip_onset_s")
-    Xh, _, sh = _stack(held, "truth_force", ["fx", "fy"], "slip_onset_s")
-    for thr in (0.5, None):
-        det = ForceDerivative(threshold=thr).fit(X, y, segments=seg)
-        rows.append(
-            ("ForceDerivative (fx, fy)", det, export_force_derivative(det), Xh, sh)
-        )
-    X, y, seg = _stack(fit_ds, "pac", ["pac"], "slip_onset_s")
-    Xh, _, sh = _stack(held, "pac", ["pac"], "slip_onset_s")
-    base = pressure_baseline(PressureVibration(), X, segments=seg)
-    for thr in (2.0, None):
-        det = PressureVibration(baseline=base, threshold=thr).fit(X, y, segments=seg)
-        rows.append(("PressureVibration", det, export_pressure_vibration(det), Xh, sh))
-    tail = float(rows[-1][2].features["tail"])  # type: ignore[index]
-    swing = max(float(np.ptp(Xh[sh == k])) for k in np.unique(sh))
-    print(
-        f"pressure baseline (median over the fit trials): {base:.3f} counts; filter tail "
-        f"T(L) = {tail:.2e}, largest held-out swing {swing:.0f} counts -> score error "
-        f"bound T(L) x swing / baseline = {tail * swing / base:.1e}"
-    )
-    print_parity_rows(rows)
 
 
 def print_parity_rows(
@@ -205,29 +147,13 @@ def print_parity_rows(
         )
 
 
-# ``python -m slipkit.export.detectors`` runs a second copy of this module as
-# __main__ after the package import may already have registered the first one; only
-# the imported module registers (a duplicate registration raises).
-if __name__ != "__main__":
-    register_exporter(ForceDerivative, export_force_derivative)
-    register_exporter(PressureVibration, export_pressure_vibration)
-    register_runtime_steps(PressureVibration, pressure_runtime_steps)
-
 __all__ = [
     "DEFAULT_TAIL_TOL",
     "NO_SCORE",
     "DetectorGraph",
-    "baseline_agreement",
     "check_detector_parity",
     "detector_windows",
-    "export_force_derivative",
-    "export_pressure_vibration",
     "graph_scores",
-    "pressure_baseline",
     "print_parity_rows",
     "steady_state_fir",
-    "with_fixed_baseline",
 ]
-
-if __name__ == "__main__":
-    main()

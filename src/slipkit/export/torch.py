@@ -458,10 +458,9 @@ _register_skorch()
 
 def _register_slipkit_nets() -> None:
     """slipkit's skorch-based estimators keep ``module_`` + scalers (not NeuralNet subclasses)."""
-    from slipkit.models.force import ForceMLP
     from slipkit.models.window import WindowCNN, WindowGRU, WindowMLP
 
-    for cls in (ForceMLP, WindowMLP, WindowCNN, WindowGRU):
+    for cls in (WindowMLP, WindowCNN, WindowGRU):
         register_exporter(cls, export_skorch_estimator)
 
 

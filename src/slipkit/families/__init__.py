@@ -10,7 +10,8 @@ scene and scenario resolves, each config and doc page exists.
 
 The records hold strings only, resolved on demand (:func:`resolve`), so this module imports
 nothing of the stages and any stage may read it. A family packaged as one folder lives in
-``slipkit/families/<name>/`` (``gelsight``, ``sliptack``, ``fsr``, ``tactip``, ``davis``); :data:`PLUGIN_MODULES` names the
+``slipkit/families/<name>/`` (every family: ``tactip``, ``biotac``, ``fsr``, ``sliptack``, ``davis``,
+``gelsight``); :data:`PLUGIN_MODULES` names the
 modules of such folders that register plug-ins when imported, by kind, and the stage owning a
 kind imports them by name (:func:`load_plugins`), never statically.
 """
@@ -81,6 +82,10 @@ _DV = "slipkit.families.davis."
 _DAVIS_EXPORTERS = tuple(
     f"{_DV}export.{m}" for m in ("polarity", "onset", "classifier")
 )
+_BT = "slipkit.families.biotac."
+_BIOTAC_EXPORTERS = tuple(
+    f"{_BT}export.{m}" for m in ("detectors", "force", "window_rules")
+)
 
 FAMILIES: dict[str, Family] = {
     f.name: f
@@ -102,18 +107,16 @@ FAMILIES: dict[str, Family] = {
             name="biotac",
             sensor="biotac",
             tasks=(
-                _T + "force:ForceRegression",
-                _T + "force_direction:FingerDirection",
+                _BT + "force_task:ForceRegression",
+                _BT + "direction_task:FingerDirection",
                 _WINDOWS,
-                _T + "grasp:GraspStability",
+                _BT + "grasp_task:GraspStability",
                 _DETECT,
             ),
-            deploys=(_T + "force:ForceRegression", _WINDOWS, _DETECT),
-            compares=(_T + "force:ForceRegression", _WINDOWS, _DETECT),
+            deploys=(_BT + "force_task:ForceRegression", _WINDOWS, _DETECT),
+            compares=(_BT + "force_task:ForceRegression", _WINDOWS, _DETECT),
             exporters=(
-                "slipkit.export.force",
-                "slipkit.export.biotac_detectors",
-                "slipkit.export.window_analytic",
+                *_BIOTAC_EXPORTERS,
                 "slipkit.export.window_stats",
                 "slipkit.export.generic",
                 "slipkit.export.frame_gru",
@@ -126,6 +129,9 @@ FAMILIES: dict[str, Family] = {
                 "baselines/biotac.md",
                 "models/force.md",
                 "models/slip_type.md",
+            ),
+            detectors=tuple(
+                _BT + m for m in ("detectors", "slip_twist", "electrode_energy")
             ),
         ),
         Family(
@@ -199,16 +205,12 @@ PLUGIN_MODULES: dict[str, tuple[str, ...]] = {
         *_FSR_EXPORTERS,
         *_TACTIP_EXPORTERS,
         *_DAVIS_EXPORTERS,
+        *_BIOTAC_EXPORTERS,
     ),
-    "deployers": (_ST + "deploy", _TT + "deploy", _DV + "deploy"),
-    "adapters": (_ST + "adapter", _TT + "adapter", _DV + "adapter"),
-    "scenarios": (
-        _ST + "scenario",
-        _FSR + "scenario",
-        _TT + "scenario",
-        _DV + "scenario",
-    ),
-    "effects": (_ST + "effects", _FSR + "effects", _TT + "effects", _DV + "effects"),
+    "deployers": tuple(f + "deploy" for f in (_ST, _TT, _DV, _BT)),
+    "adapters": tuple(f + "adapter" for f in (_ST, _TT, _DV, _BT)),
+    "scenarios": tuple(f + "scenario" for f in (_ST, _FSR, _TT, _DV, _BT)),
+    "effects": tuple(f + "effects" for f in (_ST, _FSR, _TT, _DV, _BT)),
     "tasks": (_ST + "task", _DV + "task"),
 }
 

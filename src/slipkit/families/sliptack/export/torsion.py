@@ -11,11 +11,11 @@ from numpy.typing import NDArray
 from sklearn.utils.validation import check_is_fitted
 
 from slipkit.export._graph import GraphBuilder
-from slipkit.export.biotac_detectors import _band_matrix
 from slipkit.export.detector_graph import (
     DEFAULT_TAIL_TOL,
     DetectorGraph,
     _axes,
+    _band_matrix,
     _finish,
     _graph,
     _prologue,

@@ -10,10 +10,10 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 from slipkit import config_dir
-from slipkit.closedloop.biotac import FrictionController
 from slipkit.closedloop.commands import closedloop_main, load_scenario, scenario_of
 from slipkit.closedloop.detectors import Detector, NoDetector, OracleDetector
 from slipkit.closedloop.plant import PlantState
+from slipkit.families.biotac.scenario import FrictionController
 from slipkit.sim.commands import build_scene
 
 

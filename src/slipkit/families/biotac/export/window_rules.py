@@ -4,10 +4,10 @@ Both classifiers score a window of the window-classification task
 (:class:`~slipkit.train.tasks.slip_type.WindowClassification`) with a closed formula and
 one threshold chosen on the training ROC, so each graph is that formula in ONNX ops:
 
-* :class:`~slipkit.baselines.window_energy.ElectrodeEnergyClassifier` (``dos_real``'s
+* :class:`~slipkit.families.biotac.electrode_energy.ElectrodeEnergyClassifier` (``dos_real``'s
   ``energy``): the RMS frame-to-frame change over all channels, NaN steps skipped
   (``nanmean``), a non-finite energy read as 0, minus ``threshold_`` (counts / frame);
-* :class:`~slipkit.baselines.slip_type.SlipTwistClassifier` (``biotac_slip_type``'s
+* :class:`~slipkit.families.biotac.slip_twist.SlipTwistClassifier` (``biotac_slip_type``'s
   ``twist``): per electrode the mean of the last ``k`` frames minus the mean of the
   first ``k`` (``k = max(1, width // 4)``, NaN frames skipped, a non-finite change read
   as 0), the share that cancels out ``1 - |sum D| / sum |D|`` (0 without change), minus
@@ -25,11 +25,12 @@ both ``predict`` methods). For the twist rule ``classes`` are ``(linear_class_,
 rotational_class)``; for the energy rule ``(touch_class, motion_class_)``: a
 direction-blind rule predicts only these two of its seven classes, so its bundle is a
 binary motion-vs-touch detector whose slip class is the motion class
-(:func:`deploy_slip_classes`, read by the window deployer).
+(registered with :func:`slipkit.export.deploy.register_window_rule`, read by the window
+deployer).
 
 The classifiers keep no input width (they take any window of whole frames), so the
 exporters need the window length in frames, ``n_frames``; the window deployer passes it
-from the task (:func:`deploy_export_options`). Hand-built graphs: the formulas are a few
+from the task (both rules registered as window rules). Hand-built graphs: the formulas are a few
 reductions, and no converter library knows these classes.
 """
 
@@ -41,9 +42,8 @@ import numpy as np
 from onnx import helper
 from sklearn.utils.validation import check_is_fitted
 
-from slipkit.baselines.slip_type import SlipTwistClassifier
-from slipkit.baselines.window_energy import ElectrodeEnergyClassifier
 from slipkit.export._graph import DOUBLE, FLOAT, GraphBuilder
+from slipkit.export.deploy import register_window_rule
 from slipkit.export.registry import (
     DEFAULT_OPSET,
     ExportedGraph,
@@ -51,6 +51,8 @@ from slipkit.export.registry import (
     producers,
     register_exporter,
 )
+from slipkit.families.biotac.electrode_energy import ElectrodeEnergyClassifier
+from slipkit.families.biotac.slip_twist import SlipTwistClassifier
 
 WINDOW_INPUT = "window"
 SCORE = "score"
@@ -284,38 +286,18 @@ def export_slip_twist(
     )
 
 
-#: the analytic window classifiers whose exporters need the window length
-WINDOW_RULES = (ElectrodeEnergyClassifier, SlipTwistClassifier)
-
-
-def deploy_export_options(model: Any, n_frames: int) -> dict[str, Any]:
-    """Exporter options the window deployer passes for ``model``: ``n_frames`` for these rules.
-
-    Other window models record their input width (``n_features_in_``) and take no
-    options: ``{}``.
-    """
-    return {"n_frames": int(n_frames)} if isinstance(model, WINDOW_RULES) else {}
-
-
-def deploy_slip_classes(model: Any) -> list[str] | None:
-    """The slip classes of ``model``'s bundle when its graph names fewer than ``classes_``.
-
-    The energy rule's graph decides between touch and its one motion class
-    (``motion_class_``): that class is the slip class. None for every other model
-    (the deployer's default choice applies).
-    """
-    if isinstance(model, ElectrodeEnergyClassifier):
-        return [str(model.motion_class_)]
-    return None
+def _energy_slip_classes(model: ElectrodeEnergyClassifier) -> list[str]:
+    """The energy rule's graph decides between touch and its one motion class
+    (``motion_class_``): that class is the slip class."""
+    return [str(model.motion_class_)]
 
 
 register_exporter(ElectrodeEnergyClassifier, export_electrode_energy)
 register_exporter(SlipTwistClassifier, export_slip_twist)
+register_window_rule(ElectrodeEnergyClassifier, _energy_slip_classes)
+register_window_rule(SlipTwistClassifier)
 
 __all__ = [
-    "WINDOW_RULES",
-    "deploy_export_options",
-    "deploy_slip_classes",
     "export_electrode_energy",
     "export_slip_twist",
 ]

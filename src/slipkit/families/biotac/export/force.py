@@ -1,10 +1,10 @@
 """Exporters of the analytic BioTac force models: hand-built graphs of few nodes.
 
-* :class:`~slipkit.models.force.WeightedNormalsRegressor` -- ``F_k = S_k sum_i E_i
+* :class:`~slipkit.families.biotac.force.WeightedNormalsRegressor` -- ``F_k = S_k sum_i E_i
   N_k,i + o_k`` is one matrix product: ``Gemm(x, W, o)`` in float32 with ``W[i, k] =
   N_k,i S_k`` for the electrode columns and zero rows for any extra input column (the
   model reads only its electrodes); the graph is that one node.
-* :class:`~slipkit.models.force.LocalLinearRegressor` -- with ``z = (x - mean) /
+* :class:`~slipkit.families.biotac.force.LocalLinearRegressor` -- with ``z = (x - mean) /
   scale``, the receptive-field activations are ``softmax(-||z - c_k||^2 / 2 h^2)`` =
   ``softmax((2 z C^T - ||C||^2) / 2 h^2)`` (``||z||^2`` is the same for every field of
   a row, and softmax ignores a per-row constant): one ``Gemm``; every local ridge
@@ -22,6 +22,9 @@ a float64 force: no cast nodes): the electrode inputs are counts of order
 subtraction did, so float32 arithmetic would lose digits wherever the counts sit far
 from the scaler's mean relative to its scale. The output is ``predict`` (N), shape ``(batch, n_outputs)``
 (``(batch,)`` for a model fitted on a 1-D target).
+
+:class:`~slipkit.families.biotac.force.ForceMLP` (a torch module and its scalers) exports
+through :func:`slipkit.export.torch.export_skorch_estimator`.
 """
 
 from __future__ import annotations
@@ -40,7 +43,12 @@ from slipkit.export.registry import (
     producers,
     register_exporter,
 )
-from slipkit.models.force import LocalLinearRegressor, WeightedNormalsRegressor
+from slipkit.export.torch import export_skorch_estimator
+from slipkit.families.biotac.force import (
+    ForceMLP,
+    LocalLinearRegressor,
+    WeightedNormalsRegressor,
+)
 
 INPUT = "features"
 SCORE = "score"
@@ -258,3 +266,5 @@ def export_local_linear(
 
 register_exporter(WeightedNormalsRegressor, export_weighted_normals)
 register_exporter(LocalLinearRegressor, export_local_linear)
+# ForceMLP keeps a torch module and its scalers (not a skorch NeuralNet): the skorch exporter
+register_exporter(ForceMLP, export_skorch_estimator)

@@ -19,8 +19,8 @@ from slipkit.data.dataset import Dataset
 from slipkit.data.importers.bts3v2 import CHANNELS, ORIENTATIONS, read_bts3v2
 from slipkit.data.io import save_dataset
 from slipkit.errors import SlipkitError
+from slipkit.families.biotac.grasp_task import GraspFeatures, GraspStability
 from slipkit.train.commands import evaluate_main, train_main
-from slipkit.train.tasks.grasp import GraspFeatures, GraspStability
 
 #: Per-orientation electrode baselines (counts): the shift the task must cope with.
 BASELINE = {"palm_down": 2800.0, "palm_side": 2950.0, "palm_45": 3150.0}
@@ -320,7 +320,7 @@ def test_grasp_pipeline_exports_to_onnx_with_parity(
     """Every orientation handling exports through skl2onnx and matches scikit-learn."""
     from slipkit.export import export
     from slipkit.export.parity import check_parity
-    from slipkit.train.tasks.grasp import grasp_pipeline
+    from slipkit.families.biotac.grasp_task import grasp_pipeline
 
     X, y, _ = GraspStability().arrays(synthetic)
     pipe = grasp_pipeline(SVC()).set_params(prep__normalise=mode).fit(X[::2], y[::2])

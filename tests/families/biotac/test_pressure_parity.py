@@ -12,17 +12,17 @@ from hydra import compose, initialize_config_dir
 from omegaconf import DictConfig
 
 from slipkit import config_dir
-from slipkit.baselines.biotac import PressureVibration
 from slipkit.export.commands import export_main
 from slipkit.export.deploy import deployment
-from slipkit.export.detectors import (
+from slipkit.export.detectors import check_detector_parity
+from slipkit.export.registry import ExportError
+from slipkit.families.biotac.detectors import PressureVibration
+from slipkit.families.biotac.export.detectors import (
     baseline_agreement,
-    check_detector_parity,
     export_pressure_vibration,
     pressure_baseline,
     with_fixed_baseline,
 )
-from slipkit.export.registry import ExportError
 from slipkit.runtime import StreamLoop, load_bundle
 from slipkit.train.commands import build, train_main
 from slipkit.train.data import training_dataset

@@ -6,7 +6,7 @@ when slip is detected"; slip is detected from the AC pressure (2.2 kHz) or the
 tangential-force derivative (300 Hz).
 
 Here each trial: the object (mass, friction, texture) is drawn by the scene model
-(:meth:`slipkit.sim.scenes.biotac.BioTacLiftSlip.sample`: one of the paper's four
+(:meth:`slipkit.families.biotac.scene.BioTacLiftSlip.sample`: one of the paper's four
 objects, contact point, load direction); the hand closes with a light press, lifts the
 object (the load rises to ``m g`` over ``lift_s``), holds it, and then the load changes
 to ``load_factor m g`` over the condition's time (something is put in the object). The
@@ -58,9 +58,9 @@ from slipkit.closedloop.plant import (
 from slipkit.closedloop.run import Outcome, speed_grid
 from slipkit.closedloop.scenarios import _draw, plant_params, register_scenario
 from slipkit.errors import SlipkitError
-from slipkit.physics.biotac import surface_point, tangent_frame
+from slipkit.families.biotac.physics import surface_point, tangent_frame
+from slipkit.families.biotac.scene import BioTacLiftSlip
 from slipkit.sim.core import EFFECTS, Scene, SceneState, draw_effect_params, effect_name
-from slipkit.sim.scenes.biotac import BioTacLiftSlip
 
 #: Pressure effects of the trial's timeline (no dependence on the plant).
 TIMELINE_EFFECTS = frozenset({"motor_vibration", "white_noise"})

@@ -15,7 +15,7 @@ from sklearn.linear_model import LinearRegression
 
 from slipkit import config_dir
 from slipkit.data import load_dataset
-from slipkit.physics.biotac import (
+from slipkit.families.biotac.physics import (
     CORE_RADIUS_MM,
     CYLINDER_LENGTH_MM,
     ELECTRODE_NAMES,
@@ -30,9 +30,9 @@ from slipkit.physics.biotac import (
     weighted_normals_force,
     weighted_normals_scales,
 )
+from slipkit.families.biotac.scene import BioTacForceProbe, BioTacLiftSlip
 from slipkit.sim import EFFECTS, Scene, SceneState, SimulationError
 from slipkit.sim.commands import build_scene
-from slipkit.sim.scenes.biotac import BioTacForceProbe, BioTacLiftSlip
 
 BASE = 2000.0
 LEFT = np.arange(6)  # e1..e6, mirrored by e11..e16

@@ -2,6 +2,16 @@
 stand-in for the IIR band-pass, over a fixed baseline).
 
 The graph contract: :mod:`slipkit.export.detectors`.
+
+* :class:`~slipkit.families.biotac.detectors.ForceDerivative` -- ``W = span + 1`` (4):
+  ``Ft = sqrt(fx^2 + fy^2)`` (or ``Ft`` itself) at both ends, ``-(Ft[-1] - Ft[0])
+  rate / span``; the same numbers as the batch detector.
+* :class:`~slipkit.families.biotac.detectors.PressureVibration` -- the IIR band-pass as one
+  MatMul over ``W = L + window - 1`` samples (:func:`~slipkit.export.detector_graph.steady_state_fir`), rectify,
+  ``TopK`` for the ``n_exceed``-th largest of the last ``window`` outputs, over a
+  **fixed baseline** (the detector's ``baseline`` option).
+
+Parity and time per call on simulated lifts: ``python -m slipkit.families.biotac.export.parity``.
 """
 
 from __future__ import annotations
@@ -10,19 +20,19 @@ import copy
 import math
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 from onnx import helper
 from scipy.signal import sosfilt, sosfilt_zi
 from sklearn.utils.validation import check_is_fitted
 
 from slipkit.baselines.base import segment_bounds
-from slipkit.baselines.biotac import ForceDerivative, PressureVibration
 from slipkit.export._graph import GraphBuilder
 from slipkit.export.detector_graph import (
     DEFAULT_TAIL_TOL,
     NO_SCORE,
     DetectorGraph,
     _axes,
+    _band_matrix,
     _finish,
     _graph,
     _not_finite,
@@ -34,7 +44,10 @@ from slipkit.export.registry import (
     ExportError,
     RuntimeSteps,
     StreamContext,
+    register_exporter,
+    register_runtime_steps,
 )
+from slipkit.families.biotac.detectors import ForceDerivative, PressureVibration
 
 
 # -- BioTac force derivative --------------------------------------------------------------
@@ -214,11 +227,6 @@ def baseline_agreement(
     return float(np.mean(same)), int(both.sum())
 
 
-def _band_matrix(g: GraphBuilder, v: str, m: NDArray[np.float64]) -> str:
-    # One MatMul: ~W x n_out multiply-adds, one BLAS call in onnxruntime.
-    return g.op("MatMul", v, g.const(m, np.float64), stem="band")
-
-
 def export_pressure_vibration(
     detector: PressureVibration,
     *,
@@ -260,7 +268,7 @@ def export_pressure_vibration(
         raise ExportError(
             "PressureVibration with baseline=None measures its baseline per recording, "
             "which a fixed window cannot; export needs a fixed one: refit with "
-            "baseline=<counts> (e.g. slipkit.export.detectors.pressure_baseline("
+            "baseline=<counts> (e.g. slipkit.families.biotac.export.detectors.pressure_baseline("
             "detector, X_calibration)) or pass baseline= to the exporter"
         )
     if not (math.isfinite(float(base)) and float(base) > 0):
@@ -370,3 +378,8 @@ def pressure_runtime_steps(det: PressureVibration, ctx: StreamContext) -> Runtim
         ],
         model=deployed,
     )
+
+
+register_exporter(ForceDerivative, export_force_derivative)
+register_exporter(PressureVibration, export_pressure_vibration)
+register_runtime_steps(PressureVibration, pressure_runtime_steps)

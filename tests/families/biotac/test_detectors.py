@@ -12,8 +12,8 @@ from hypothesis import strategies as st
 from scipy.signal import sosfilt
 
 from slipkit import config_dir
-from slipkit.baselines.biotac import ForceDerivative, PressureVibration
 from slipkit.data import Dataset
+from slipkit.families.biotac.detectors import ForceDerivative, PressureVibration
 from slipkit.sim.commands import build_scene
 
 RATE = 2200.0

@@ -13,12 +13,12 @@ from sklearn.metrics import r2_score
 from sklearn.preprocessing import StandardScaler
 from sklearn.utils.estimator_checks import parametrize_with_checks
 
-from slipkit.models.force import (
+from slipkit.families.biotac.force import (
     ForceMLP,
     LocalLinearRegressor,
     WeightedNormalsRegressor,
 )
-from slipkit.physics.biotac import (
+from slipkit.families.biotac.physics import (
     ELECTRODE_NORMALS,
     linear_drive_matrix,
     weighted_normals_features,

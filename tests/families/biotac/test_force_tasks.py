@@ -18,16 +18,16 @@ import slipkit
 from slipkit.data.importers.robotic_finger import read_robotic_finger
 from slipkit.data.io import save_dataset
 from slipkit.errors import SlipkitError
-from slipkit.models.force import LocalLinearRegressor, WeightedNormalsRegressor
-from slipkit.physics.biotac import linear_drive_matrix
-from slipkit.sim.commands import build_scene
-from slipkit.train.commands import evaluate_main, train_main
-from slipkit.train.tasks.force import ForceRegression
-from slipkit.train.tasks.force_direction import (
+from slipkit.families.biotac.direction_task import (
     FingerDirection,
     angle_errors_deg,
     contiguous_block_split,
 )
+from slipkit.families.biotac.force import LocalLinearRegressor, WeightedNormalsRegressor
+from slipkit.families.biotac.force_task import ForceRegression
+from slipkit.families.biotac.physics import linear_drive_matrix
+from slipkit.sim.commands import build_scene
+from slipkit.train.commands import evaluate_main, train_main
 
 torch.set_num_threads(1)
 

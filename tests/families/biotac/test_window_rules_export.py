@@ -12,16 +12,16 @@ from hydra import compose, initialize_config_dir
 from omegaconf import DictConfig
 
 from slipkit import config_dir
-from slipkit.baselines.slip_type import SlipTwistClassifier
-from slipkit.baselines.window_energy import ElectrodeEnergyClassifier
 from slipkit.data import Dataset, LabelSpec, StreamSpec, Trial, save_dataset
 from slipkit.export import check_parity, export
 from slipkit.export.parity import run_graph
 from slipkit.export.registry import ExportError
-from slipkit.export.window_analytic import (
+from slipkit.families.biotac.electrode_energy import ElectrodeEnergyClassifier
+from slipkit.families.biotac.export.window_rules import (
     export_electrode_energy,
     export_slip_twist,
 )
+from slipkit.families.biotac.slip_twist import SlipTwistClassifier
 from slipkit.runtime import ReplaySource, StreamLoop, load_bundle
 
 WIDTH, CHANNELS = 8, 4

@@ -1,4 +1,4 @@
-"""Analytic linear-vs-rotational slip classifier (slipkit.baselines.slip_type) on BioTac windows."""
+"""Analytic linear-vs-rotational slip classifier (slipkit.families.biotac.slip_twist) on BioTac windows."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
 
 from slipkit import config_dir
-from slipkit.baselines.slip_type import SlipTwistClassifier
 from slipkit.errors import SlipkitError
+from slipkit.families.biotac.slip_twist import SlipTwistClassifier
 from slipkit.sim.commands import build_scene
 from slipkit.train.tasks.slip_type import WindowClassification, WindowSet
 

@@ -3,7 +3,7 @@
 Electrode effects act on the impedance change ``E = x - baseline`` of a stream of
 absolute counts (``truth["electrode_baseline"]``, one value per electrode), so that
 ADC quantisation and clipping can follow them. Each one is a departure from the
-backbone's linear response ``E = A F`` (:func:`slipkit.physics.biotac.linear_drive_matrix`),
+backbone's linear response ``E = A F`` (:func:`slipkit.families.biotac.physics.linear_drive_matrix`),
 which obeys the weighted-normals relation of Su et al. 2015 (Sec. IV-A) exactly; the
 paper attributes that method's situation-dependent offsets to "the highly non-linear
 deformation on the silicon skin" (Sec. V-A), and these effects are that non-linearity.
@@ -16,7 +16,7 @@ from collections.abc import Sequence
 import numpy as np
 from scipy import signal as sps
 
-from slipkit.physics.biotac import (
+from slipkit.families.biotac.physics import (
     ELECTRODE_POSITIONS_MM,
     N_ELECTRODES,
     neighbour_kernel,
