@@ -124,12 +124,7 @@ FAMILIES: dict[str, Family] = {
             scenes=("biotac_force_probe", "biotac_lift_slip", "biotac_lift_slip_hard"),
             comparisons=("biotac_force", "biotac_slip", "biotac_slip_type", "dos_real"),
             scenario="biotac",
-            docs=(
-                "simulation/biotac.md",
-                "baselines/biotac.md",
-                "models/force.md",
-                "models/slip_type.md",
-            ),
+            docs=("families/biotac.md",),
             detectors=tuple(
                 _BT + m for m in ("detectors", "slip_twist", "electrode_energy")
             ),
