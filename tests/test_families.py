@@ -152,3 +152,78 @@ def test_family_detector_modules_train_in_the_detector_slot() -> None:
     node = {"_target_": fsr + "touch_slip.FSRTouchSlip"}
     assert _is_analytic("fsr_roc", node, [])
     assert not _is_analytic("m", {"_target_": "slipkit.models.window.WindowMLP"}, [])
+
+
+def test_each_family_folder_declares_its_own_record() -> None:
+    """Every folder under slipkit/families/ is a family whose record lives in its own
+    ``__init__.py`` (adding a family edits no shared module)."""
+    import importlib
+
+    folders = sorted(
+        p.name
+        for p in (ROOT / "src/slipkit/families").iterdir()
+        if (p / "__init__.py").is_file() and not p.name.startswith("_")
+    )
+    assert folders == sorted(FAMILIES)
+    for name in folders:
+        module = importlib.import_module(f"slipkit.families.{name}")
+        assert FAMILIES[name] is module.FAMILY
+
+
+def _record(name: str, **parts: object) -> Family:
+    return Family(
+        name=name, sensor=name, tasks=(), deploys=(), compares=(), exporters=(), **parts
+    )  # type: ignore[arg-type]
+
+
+def test_a_family_package_registers_through_the_entry_point_group(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A lab's family shipped as its own package: an entry point of group
+    ``slipkit.families`` naming a module with ``FAMILY`` joins the folders' records, and
+    its plug-in modules join PLUGIN_MODULES."""
+    import importlib.metadata
+    import sys
+
+    import slipkit.families as fam
+
+    (tmp_path / "labfam.py").write_text(
+        "from slipkit.families import Family\n"
+        "FAMILY = Family(name='labfam', sensor='labfam', tasks=(), deploys=(),\n"
+        "    compares=(), exporters=('labfam_export',),\n"
+        "    plugins={'effects': ('labfam_effects',)})\n",
+        encoding="utf-8",
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    ep = importlib.metadata.EntryPoint("labfam", "labfam", fam.ENTRY_POINT_GROUP)
+    real = importlib.metadata.entry_points
+
+    def entry_points(**kw: str) -> object:
+        if kw.get("group") == fam.ENTRY_POINT_GROUP:
+            return [ep]
+        return real(**kw)
+
+    monkeypatch.setattr(importlib.metadata, "entry_points", entry_points)
+    found = fam.discover()
+    sys.modules.pop("labfam", None)
+    assert set(FAMILIES) | {"labfam"} == set(found)
+    modules = fam.plugin_modules(found)
+    assert "labfam_export" in modules["exporters"]
+    assert modules["effects"][-1] == "labfam_effects"
+    # slipkit's own generic exporters are imported by slipkit.export, not as plug-ins
+    assert not [m for m in modules["exporters"] if m.startswith("slipkit.export.")]
+
+
+def test_a_second_record_of_one_name_or_a_folder_without_one_is_refused() -> None:
+    from slipkit.errors import SlipkitError
+    from slipkit.families import _record_of, discover, plugin_modules
+
+    with pytest.raises(SlipkitError, match="'fsr' is already declared by here"):
+        discover([("here", _record("fsr")), ("there", _record("fsr"))])
+    with pytest.raises(
+        SlipkitError, match=r"mylab\.fam: a sensor family declares FAMILY"
+    ):
+        _record_of(object(), "mylab.fam")
+    bad = {"x": _record("x", plugins={"widgets": ("m",)})}
+    with pytest.raises(SlipkitError, match="plugins kind 'widgets'"):
+        plugin_modules(bad)

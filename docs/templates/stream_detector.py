@@ -2,8 +2,8 @@
 
 Copy this file to ``src/slipkit/families/<family>/detector.py``, rename ``ForceDrop``,
 replace the score in ``_scores`` and the same arithmetic in ``export_force_drop``, and
-name the module in ``PLUGIN_MODULES["exporters"]`` (``slipkit/families/__init__.py``) so
-``slipkit export`` registers it. ``tests/test_extension_template.py`` runs this file as it
+name the module in the family record's ``exporters`` (``FAMILY`` in the folder's
+``__init__.py``) so ``slipkit export`` registers it. ``tests/test_extension_template.py`` runs this file as it
 stands: fit, batch and streaming decisions agree, the graph matches the detector in
 onnxruntime. Keep those three checks for your detector (docs/extending.md).
 

@@ -1,26 +1,40 @@
-"""Sensor families: one record per family listing its parts, as ``"module:attr"`` strings.
+"""Sensor families: each family folder declares its parts; this module finds them.
 
 A family is a sensor and what slipkit does with it: its simulated scenes and effects, its
 tasks (the data recipes), its estimators' exporters, the deployers and comparison adapters
-of its tasks, its comparison and closed-loop configs and its docs. :data:`FAMILIES` lists
-them in one place so that a reader finds a family's parts without searching, and
-``tests/test_families.py`` checks every record is complete: each task has the comparison
+of its tasks, its comparison and closed-loop configs and its docs. Each lives in one folder,
+``slipkit/families/<name>/``, whose ``__init__.py`` holds its record, ``FAMILY =
+Family(...)`` (:class:`Family`: ``"module:attr"`` strings,
+resolved on demand by :func:`resolve`). A family shipped as its own package registers the
+same record under the entry-point group ``slipkit.families`` (the entry point names a
+module holding ``FAMILY``, or the record itself). Adding a family therefore edits no
+shared module: :data:`FAMILIES` is every folder's record and every entry point's, and
+``tests/test_families.py`` checks each record is complete (each task has the comparison
 adapter and deployer the record claims, each exporter module registers an exporter, each
-scene and scenario resolves, each config and doc page exists.
+scene and scenario resolves, each config and doc page exists).
 
-The records hold strings only, resolved on demand (:func:`resolve`), so this module imports
-nothing of the stages and any stage may read it. A family packaged as one folder lives in
-``slipkit/families/<name>/`` (every family: ``tactip``, ``biotac``, ``fsr``, ``sliptack``, ``davis``,
-``gelsight``); :data:`PLUGIN_MODULES` names the
-modules of such folders that register plug-ins when imported, by kind, and the stage owning a
-kind imports them by name (:func:`load_plugins`), never statically.
+Reading the records imports each family folder's ``__init__`` only, nothing of the
+stages (a folder's ``__init__`` imports :class:`Family` from here, defined before the
+folders are read). :data:`PLUGIN_MODULES` gathers the records' plug-in modules by kind, and the stage
+owning a kind imports them by name (:func:`load_plugins`), never statically.
 """
 
 from __future__ import annotations
 
 import importlib
+import importlib.metadata
+import pkgutil
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
+
+from slipkit.errors import SlipkitError
+
+#: the generic tasks a family may train, deploy and compare through
+DETECTION_TASK = "slipkit.train.tasks.detection:StreamDetection"
+WINDOW_TASK = "slipkit.train.tasks.slip_type:WindowClassification"
+#: the kinds of plug-in a family registers besides its exporters
+PLUGIN_KINDS = ("deployers", "adapters", "scenarios", "effects", "tasks")
 
 
 @dataclass(frozen=True)
@@ -52,6 +66,10 @@ class Family:
     detectors : tuple of str
         Modules of a family folder whose estimators train as detectors (the ``detector:``
         slot of a train config, as ``slipkit.baselines``'s): :func:`detector_module`.
+    plugins : mapping of str to tuple of str
+        Modules whose import registers the family's other plug-ins, by kind
+        (``deployers``, ``adapters``, ``scenarios``, ``effects``, ``tasks``):
+        :data:`slipkit.families.PLUGIN_MODULES`.
     """
 
     name: str
@@ -65,124 +83,90 @@ class Family:
     scenario: str | None = None
     docs: tuple[str, ...] = field(default_factory=tuple)
     detectors: tuple[str, ...] = ()
+    plugins: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
 
 
-_T = "slipkit.train.tasks."
-_DETECT = _T + "detection:StreamDetection"
-_WINDOWS = _T + "slip_type:WindowClassification"
-_ST = "slipkit.families.sliptack."
-_SLIPTACK_EXPORTERS = tuple(
-    f"{_ST}export.{m}" for m in ("speed", "detector", "onset", "spectral", "torsion")
-)
-_FSR = "slipkit.families.fsr."
-_FSR_EXPORTERS = (_FSR + "export.touch_slip", _FSR + "export.onset")
-_TT = "slipkit.families.tactip."
-_TACTIP_EXPORTERS = (_TT + "export.svm", _TT + "export.detector")
-_DV = "slipkit.families.davis."
-_DAVIS_EXPORTERS = tuple(
-    f"{_DV}export.{m}" for m in ("polarity", "onset", "classifier")
-)
-_BT = "slipkit.families.biotac."
-_BIOTAC_EXPORTERS = tuple(
-    f"{_BT}export.{m}" for m in ("detectors", "force", "window_rules")
-)
+#: the entry-point group a family shipped as its own package registers under
+ENTRY_POINT_GROUP = "slipkit.families"
 
-FAMILIES: dict[str, Family] = {
-    f.name: f
-    for f in (
-        Family(
-            name="tactip",
-            sensor="tactip",
-            tasks=(_TT + "task:TacTipFrames", _TT + "task_table:TacTipTable1", _DETECT),
-            deploys=(_TT + "task:TacTipFrames", _DETECT),
-            compares=(_TT + "task:TacTipFrames", _DETECT),
-            exporters=_TACTIP_EXPORTERS,
-            scenes=("tactip_gravity_drop", "tactip_gravity_drop_hard"),
-            comparisons=("tactip",),
-            scenario="tactip",
-            docs=("families/tactip.md",),
-            detectors=(_TT + "detector",),
-        ),
-        Family(
-            name="biotac",
-            sensor="biotac",
-            tasks=(
-                _BT + "force_task:ForceRegression",
-                _BT + "direction_task:FingerDirection",
-                _WINDOWS,
-                _BT + "grasp_task:GraspStability",
-                _DETECT,
-            ),
-            deploys=(_BT + "force_task:ForceRegression", _WINDOWS, _DETECT),
-            compares=(_BT + "force_task:ForceRegression", _WINDOWS, _DETECT),
-            exporters=(
-                *_BIOTAC_EXPORTERS,
-                "slipkit.export.window_stats",
-                "slipkit.export.generic",
-                "slipkit.export.frame_gru",
-            ),
-            scenes=("biotac_force_probe", "biotac_lift_slip", "biotac_lift_slip_hard"),
-            comparisons=("biotac_force", "biotac_slip", "biotac_slip_type", "dos_real"),
-            scenario="biotac",
-            docs=("families/biotac.md",),
-            detectors=tuple(
-                _BT + m for m in ("detectors", "slip_twist", "electrode_energy")
-            ),
-        ),
-        Family(
-            name="fsr",
-            sensor="fsr",
-            tasks=(_DETECT,),
-            deploys=(_DETECT,),
-            compares=(_DETECT,),
-            exporters=(*_FSR_EXPORTERS, "slipkit.export.generic"),
-            scenes=("fsr_probe_slide", "fsr_probe_slide_hard"),
-            comparisons=("fsr",),
-            scenario="fsr",
-            docs=("families/fsr.md",),
-            detectors=(_FSR + "touch_slip", _FSR + "onset"),
-        ),
-        Family(
-            name="sliptack",
-            sensor="sliptack",
-            tasks=(_ST + "task:SlipTackSpeed", _ST + "task:SlipTackAccel", _DETECT),
-            deploys=(_ST + "task:SlipTackSpeed", _DETECT),
-            compares=(_ST + "task:SlipTackSpeed", _ST + "task:SlipTackAccel", _DETECT),
-            exporters=_SLIPTACK_EXPORTERS,
-            scenes=("sliptack_pull", "sliptack_pull_hard", "sliptack_drop"),
-            comparisons=("sliptack", "sliptack_slip"),
-            scenario="sliptack",
-            docs=("families/sliptack.md",),
-            detectors=tuple(_ST + m for m in ("speed", "accel", "onset", "torsion")),
-        ),
-        Family(
-            name="davis",
-            sensor="davis",
-            tasks=(_DV + "task:DavisRelease",),
-            deploys=(_DV + "task:DavisRelease",),
-            compares=(_DV + "task:DavisRelease",),
-            exporters=_DAVIS_EXPORTERS,
-            scenes=("davis_release", "davis_release_hard"),
-            comparisons=("davis",),
-            scenario="davis",
-            docs=("families/davis.md",),
-            detectors=(_DV + "polarity", _DV + "onset"),
-        ),
-        Family(
-            name="gelsight",
-            sensor="gelsight",
-            tasks=(_DETECT,),
-            deploys=(_DETECT,),
-            compares=(_DETECT,),
-            exporters=("slipkit.families.gelsight.export",),
-            docs=("families/gelsight.md",),
-        ),
+
+def _record_of(obj: Any, where: str) -> Family:
+    record = obj if isinstance(obj, Family) else getattr(obj, "FAMILY", None)
+    if not isinstance(record, Family):
+        raise SlipkitError(
+            f"{where}: a sensor family declares FAMILY = slipkit.families.Family(...) "
+            f"(found {type(record).__name__})"
+        )
+    return record
+
+
+def _folder_records() -> Iterable[tuple[str, Family]]:
+    for info in sorted(pkgutil.iter_modules(__path__), key=lambda i: i.name):
+        if info.ispkg and not info.name.startswith("_"):
+            module = importlib.import_module(f"{__name__}.{info.name}")
+            yield f"slipkit/families/{info.name}", _record_of(module, module.__name__)
+
+
+def _entry_point_records() -> Iterable[tuple[str, Family]]:
+    for ep in sorted(
+        importlib.metadata.entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name
+    ):
+        where = f"entry point {ep.name!r} ({ep.value}) of group {ENTRY_POINT_GROUP!r}"
+        yield where, _record_of(ep.load(), where)
+
+
+def discover(
+    sources: Iterable[tuple[str, Family]] | None = None,
+) -> dict[str, Family]:
+    """Every family's record by name: the family folders', then the entry points'.
+
+    Two records of one name are refused, naming both places.
+    """
+    found: dict[str, Family] = {}
+    origin: dict[str, str] = {}
+    pairs = (
+        sources
+        if sources is not None
+        else [*_folder_records(), *_entry_point_records()]
     )
-}
+    for where, record in pairs:
+        if record.name in found:
+            raise SlipkitError(
+                f"{where}: sensor family {record.name!r} is already declared by "
+                f"{origin[record.name]}"
+            )
+        found[record.name], origin[record.name] = record, where
+    return found
 
-#: modules of family folders (``slipkit/families/<name>/``) whose import registers their
-#: plug-ins, by kind; the stage that owns the kind imports them by name
-#: (:func:`load_plugins`) at its entry or at its first lookup:
+
+def plugin_modules(families: Mapping[str, Family]) -> dict[str, tuple[str, ...]]:
+    """The records' plug-in modules by kind (each once, in the records' order).
+
+    ``exporters`` holds the families' exporter modules outside slipkit's own stages
+    (``slipkit.export`` imports its generic exporters itself).
+    """
+    kinds: dict[str, list[str]] = {"exporters": [], **{k: [] for k in PLUGIN_KINDS}}
+    for f in families.values():
+        kinds["exporters"] += [
+            m
+            for m in f.exporters
+            if m.startswith(__name__ + ".") or not m.startswith("slipkit.")
+        ]
+        for kind, modules in f.plugins.items():
+            if kind not in kinds:
+                raise SlipkitError(
+                    f"sensor family {f.name!r}: plugins kind {kind!r} is not one of "
+                    f"{sorted(kinds)}"
+                )
+            kinds[kind] += modules
+    return {k: tuple(dict.fromkeys(v)) for k, v in kinds.items()}
+
+
+#: every family's record by name (:func:`discover`)
+FAMILIES: dict[str, Family] = discover()
+
+#: modules whose import registers the families' plug-ins, by kind; the stage that owns
+#: the kind imports them by name (:func:`load_plugins`) at its entry or first lookup:
 #:
 #: * ``exporters`` -- ``slipkit.export`` (exporters by estimator class);
 #: * ``deployers`` -- :func:`slipkit.export.deploy.deployer_for` (deployers by task class);
@@ -193,21 +177,7 @@ FAMILIES: dict[str, Family] = {
 #:   the analytic estimators learned-model tasks refuse).
 #:
 #: Scenes, tasks and estimators are built from ``configs/`` by their ``_target_`` paths.
-PLUGIN_MODULES: dict[str, tuple[str, ...]] = {
-    "exporters": (
-        "slipkit.families.gelsight.export",
-        *_SLIPTACK_EXPORTERS,
-        *_FSR_EXPORTERS,
-        *_TACTIP_EXPORTERS,
-        *_DAVIS_EXPORTERS,
-        *_BIOTAC_EXPORTERS,
-    ),
-    "deployers": tuple(f + "deploy" for f in (_ST, _TT, _DV, _BT)),
-    "adapters": tuple(f + "adapter" for f in (_ST, _TT, _DV, _BT)),
-    "scenarios": tuple(f + "scenario" for f in (_ST, _FSR, _TT, _DV, _BT)),
-    "effects": tuple(f + "effects" for f in (_ST, _FSR, _TT, _DV, _BT)),
-    "tasks": (_ST + "task", _DV + "task"),
-}
+PLUGIN_MODULES: dict[str, tuple[str, ...]] = plugin_modules(FAMILIES)
 
 
 def resolve(ref: str) -> Any:
@@ -233,10 +203,13 @@ def load_plugins(kind: str) -> None:
 
 
 __all__ = [
+    "ENTRY_POINT_GROUP",
     "FAMILIES",
     "PLUGIN_MODULES",
     "Family",
     "detector_module",
+    "discover",
     "load_plugins",
+    "plugin_modules",
     "resolve",
 ]
