@@ -13,7 +13,8 @@ Stages, each with a progress bar and its wall time printed at the end:
    the verdict is taken on the means over the seeds;
 4. **export** the verdict of each family (:func:`slipkit.compare.table.choose_deploy`:
    highest mean score among the exported ones whose p99 meets the budget; when none
-   does, the best-scoring one, marked not recommended) to ``<out>/exports/<family>``;
+   does, the best-scoring one, marked not recommended) to ``<out>/exports/<family>``
+   (a family with none recommended: ``<out>/exports/not_recommended/<family>``);
 5. **replay** that bundle's held-out test frames through the runtime loop
    (:class:`slipkit.runtime.StreamLoop`), paced at the sensor's rate, and judge its p99
    against the sensor's budget by the latency rule (:mod:`slipkit.runtime.budget`, as
@@ -68,6 +69,9 @@ DATA, COMPARE, EXPORTS, CLOSEDLOOP, REPORT = (
     "closedloop",
     "report.md",
 )
+#: where a family whose comparison recommends nothing gets its best candidate's bundle,
+#: under ``exports/`` (so every bundle in ``exports/<family>`` is a recommended one)
+NOT_RECOMMENDED = "not_recommended"
 REPORT_TITLE = "# slipkit demo"
 LAYOUT = Layout(
     "demo",
@@ -277,6 +281,14 @@ def _run_closedloop(
     return pd.read_csv(out / "summary.csv")
 
 
+def export_dir(out: Path, family: str, *, recommended: bool) -> Path:
+    """Where the demo writes a family's bundle: ``exports/<family>`` for a recommended
+    verdict, ``exports/not_recommended/<family>`` for the best candidate of a family whose
+    comparison recommends none (shown, never to be deployed)."""
+    base = out / EXPORTS
+    return base / family if recommended else base / NOT_RECOMMENDED / family
+
+
 def demo_main(cfg: DictConfig) -> Path:
     """Run the whole pipeline; print the index report's path last and return it."""
     from tqdm import tqdm
@@ -438,7 +450,7 @@ def demo_main(cfg: DictConfig) -> Path:
         best[family]["primary"] = str(res.table.attrs.get("primary", ""))
         if row["export"] != "ok":
             continue
-        bundle = out / EXPORTS / family
+        bundle = export_dir(out, family, recommended=choice.recommended)
         exported[family] = export_run(
             res.run_dir(str(row["estimator"])),
             bundle,
@@ -778,8 +790,9 @@ def _write_index(
     for family in results:
         b = best.get(family, {})
         r = replay.get(family)
+        where = export_dir(Path(), family, recommended=bool(b.get("recommended")))
         bundle = (
-            f"[exports/{family}](exports/{family})"
+            f"[{where.as_posix()}]({where.as_posix()})"
             if family in exported
             else str(b.get("export", ""))
         )

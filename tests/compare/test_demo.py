@@ -74,7 +74,14 @@ def test_demo_smoke_two_families(
     for family in ("tactip", "biotac_slip"):
         assert f"compare/{family}/report.md" in "\n".join(lines)
         assert (tmp_path / "demo" / "compare" / family / "report.md").is_file()
-        assert (tmp_path / "demo" / "exports" / family / "manifest.json").is_file()
+        exports = tmp_path / "demo" / "exports"
+        recommended = not rows[family][2].strip().startswith("none (best: ")
+        shown = exports / "not_recommended" / family
+        bundle, other = (
+            (exports / family, shown) if recommended else (shown, exports / family)
+        )
+        assert (bundle / "manifest.json").is_file()
+        assert not other.exists()
     out = capsys.readouterr().out.strip().splitlines()
     assert str(report) == out[-1]
     assert out[-2].startswith("stage times (s): simulate ")
