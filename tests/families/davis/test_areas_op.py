@@ -8,11 +8,8 @@ from scipy import ndimage
 
 from slipkit.families.davis.polarity import EIGHT, clean_frame
 from slipkit.runtime.errors import BundleError
-from slipkit.runtime.preprocessing import (
-    Pipeline,
-    clean_event_frame,
-    label_components,
-)
+from slipkit.runtime.ops.davis import clean_event_frame, label_components
+from slipkit.runtime.preprocessing import Pipeline
 
 
 @pytest.mark.parametrize("density", [0.05, 0.3, 0.5, 0.7])

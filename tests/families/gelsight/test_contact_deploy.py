@@ -10,8 +10,8 @@ import pytest
 from slipkit.families.gelsight.detectors import PinMotionDetector
 from slipkit.families.gelsight.features import pitch_of, to_points
 from slipkit.families.gelsight.stream import PinContactDetector
-from slipkit.runtime.contact_window import marker_pitch
 from slipkit.runtime.errors import BundleError
+from slipkit.runtime.ops.gelsight import marker_pitch
 from slipkit.runtime.preprocessing import Pipeline
 
 

@@ -20,8 +20,8 @@ from slipkit.families.sliptack.export.detector import (
 from slipkit.families.sliptack.export.speed import export_stick_slip_speed, graph_speeds
 from slipkit.families.sliptack.speed import StickSlipSpeed, dominant_frequency
 from slipkit.runtime import BundleError
+from slipkit.runtime.ops.sliptack import SlidingSpectrum
 from slipkit.runtime.preprocessing import Pipeline
-from slipkit.runtime.sliding_spectrum import SlidingSpectrum
 
 RATE = 1000.0
 W, S, HOP = 300, 300, 10

@@ -2,7 +2,7 @@
 
 :class:`~slipkit.families.gelsight.stream.PinContactDetector` (:func:`export_pin_contact`)
 reads one frame per call; the runtime step ``contact_window``
-(:mod:`slipkit.runtime.contact_window`) holds its frame counter, pitch and reference.
+(:mod:`slipkit.runtime.ops.gelsight`) holds its frame counter, pitch and reference.
 
 :class:`~slipkit.families.gelsight.stream.PinDivergenceDetector`:
 
@@ -154,7 +154,7 @@ def export_pin_divergence(
 
 
 def contact_window_step(detector: PinContactDetector) -> dict[str, Any]:
-    """The runtime step holding the contact window (:mod:`slipkit.runtime.contact_window`)."""
+    """The runtime step holding the contact window (:mod:`slipkit.runtime.ops.gelsight`)."""
     step: dict[str, Any] = {
         "op": "contact_window",
         "arm": int(detector.arm),

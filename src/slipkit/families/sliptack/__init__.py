@@ -7,7 +7,7 @@ One folder, by role (``docs/extending.md``): :mod:`.physics` (closed-form stick-
 (:mod:`.deploy`), the comparison adapters (:mod:`.adapter`) and the closed-loop scenario
 (:mod:`.scenario`). Its record, :data:`FAMILY`, lists them; they register when the stages load the
 record's plug-in modules (``slipkit.families.load_plugins``); the
-runtime op of the prepared spectrum stays in ``slipkit.runtime.sliding_spectrum``.
+runtime op of the prepared spectrum stays in ``slipkit.runtime.ops.sliptack``.
 """
 
 from slipkit.families import DETECTION_TASK, Family

@@ -722,7 +722,7 @@ def export_stick_slip_speed(
         ``incremental``, of the peak search on the power spectrum.
     incremental : bool
         Steps 1-2 (detrend, Hamming, DFT) as the runtime op ``sliding_spectrum``
-        (:mod:`slipkit.runtime.sliding_spectrum`: the spectrum updated per hop
+        (:mod:`slipkit.runtime.ops.sliptack`: the spectrum updated per hop
         from the previous one), the graph reading its power spectrum ``(batch,
         nfft / 2 + 1)`` (module docstring, *Incremental*). Needs the detrend's
         range boundaries on the hop grid (:func:`incremental_problem`).
@@ -933,7 +933,7 @@ def _prepare_graph(
 
 def incremental_problem(estimator: StickSlipSpeed) -> str | None:
     """Why ``estimator`` has no incremental export (None when it has one)."""
-    from slipkit.runtime.sliding_spectrum import check_sliding_grid
+    from slipkit.runtime.ops.sliptack import check_sliding_grid
 
     return check_sliding_grid(
         int(estimator.window), int(estimator.detrend_frames), int(estimator.hop)
