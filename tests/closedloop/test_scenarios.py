@@ -81,3 +81,28 @@ def test_demo_block_keeps_its_detectors_and_sizes() -> None:
         list(scen.detectors),
         list(scen.oracle_delays_ms),
     )
+
+
+def test_every_family_scenario_shares_the_grid_skeleton() -> None:
+    """Each family's scenario checks its scene and grid through GridScenario: one message
+    shape for a scene of another class, one for a grid out of range."""
+    from omegaconf import OmegaConf
+
+    from slipkit.closedloop.scenarios import SCENARIOS
+    from slipkit.closedloop.skeleton import GridScenario
+    from slipkit.families import load_plugins
+
+    load_plugins("scenarios")
+    assert {"tactip", "biotac", "fsr", "sliptack", "davis"} <= set(SCENARIOS)
+    for name in ("tactip", "biotac", "fsr", "sliptack", "davis"):
+        scenario = get_scenario(name)
+        assert isinstance(scenario, GridScenario), name
+    davis = get_scenario("davis")
+    bad = OmegaConf.create({"lift_s": {"lo": 0.3, "hi": 0.03, "n": 3}})
+    with pytest.raises(SlipkitError, match=r"closedloop\.lift_s\.lo=0\.3: expected <="):
+        davis.conditions(bad)
+    with pytest.raises(SlipkitError, match=r"closedloop\.lift_s\.hi=.*\(0, 10\] s"):
+        davis.conditions(OmegaConf.create({"lift_s": {"lo": 0.03, "hi": 60, "n": 3}}))
+    assert [0.03, 0.0949, 0.3] == davis.conditions(
+        OmegaConf.create({"lift_s": {"lo": 0.03, "hi": 0.3, "n": 3}})
+    )

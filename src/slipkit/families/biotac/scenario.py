@@ -36,7 +36,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from omegaconf import DictConfig
 
 from slipkit._options import within
 from slipkit.closedloop.detectors import Detector
@@ -52,11 +51,11 @@ from slipkit.closedloop.plant import (
     Actuator,
     PinchPlant,
     PlantState,
-    check_grid,
     check_params,
 )
-from slipkit.closedloop.run import Outcome, speed_grid
-from slipkit.closedloop.scenarios import _draw, plant_params, register_scenario
+from slipkit.closedloop.run import Outcome
+from slipkit.closedloop.scenarios import _draw, register_scenario
+from slipkit.closedloop.skeleton import GridScenario
 from slipkit.errors import SlipkitError
 from slipkit.families.biotac.physics import surface_point, tangent_frame
 from slipkit.families.biotac.scene import BioTacLiftSlip
@@ -286,24 +285,19 @@ def check_plant(plant: Mapping[str, Any]) -> None:
 
 
 @register_scenario("biotac")
-class BioTacScenario:
+class BioTacScenario(GridScenario):
     """The BioTac lift with a load change (module docstring); conditions: the change's duration, s."""
 
     condition_label = "load change time (s)"
+    family = "BioTac"
+    scene_class = BioTacLiftSlip
+    scene_title = "a BioTac lift-and-slip scene"
+    grid_key = "conditions"
+    grid_rule = CHANGE_S
 
-    def check(self, scen: DictConfig, scene: Scene) -> None:
-        """Refuse bad plant parameters and a scene that is not the BioTac lift-and-slip."""
-        check_plant(plant_params(scen))
-        if not isinstance(scene.model, BioTacLiftSlip):
-            raise SlipkitError(
-                f"closedloop.scene: the BioTac closed loop needs a BioTac lift-and-slip "
-                f"scene; got {type(scene.model).__name__}"
-            )
-
-    def conditions(self, scen: DictConfig) -> list[float]:
-        """``conditions.n`` log-spaced load-change times from ``conditions.lo`` to ``conditions.hi``, s."""
-        lo, hi, n = check_grid(dict(scen.conditions), "closedloop.conditions", CHANGE_S)
-        return speed_grid(lo, hi, n)
+    def check_plant(self, plant: Mapping[str, Any]) -> None:
+        """Refuse plant parameters outside their declared ranges (:func:`check_plant`)."""
+        check_plant(plant)
 
     def run_trial(
         self,

@@ -51,13 +51,14 @@ from functools import lru_cache, partial
 from typing import Any
 
 import numpy as np
-from omegaconf import DictConfig
 
+from slipkit._options import within
 from slipkit.closedloop.detectors import Detector
 from slipkit.closedloop.pinch import load_profile
 from slipkit.closedloop.plant import G_M_S2, Actuator, PinchPlant, PlantState
-from slipkit.closedloop.run import Outcome, speed_grid
-from slipkit.closedloop.scenarios import _draw, _span, plant_params, register_scenario
+from slipkit.closedloop.run import Outcome
+from slipkit.closedloop.scenarios import _draw, _span, register_scenario
+from slipkit.closedloop.skeleton import GridScenario
 from slipkit.errors import SlipkitError
 from slipkit.families.davis.physics import ContactPatch
 from slipkit.families.davis.scene import DavisRelease
@@ -720,31 +721,24 @@ def _no_frame() -> np.ndarray:
     raise SlipkitError("closedloop: a detector without channels asked for a frame")
 
 
+#: the lift time grid's range (``lift_s.lo``, ``lift_s.hi``)
+LIFT_S = within(0.0, 10.0, "s", above=True)
+
+
 @register_scenario("davis")
-class DavisScenario:
+class DavisScenario(GridScenario):
     """The DAVIS press, hold and lift (module docstring); conditions: the lift time, s."""
 
     condition_label = "lift time (s)"
+    family = "DAVIS"
+    scene_class = DavisRelease
+    scene_title = "a DAVIS release scene"
+    grid_key = "lift_s"
+    grid_rule = LIFT_S
 
-    def check(self, scen: DictConfig, scene: Scene) -> None:
-        """Refuse bad plant parameters and a scene that is not the DAVIS release."""
-        check_plant(plant_params(scen))
-        if not isinstance(scene.model, DavisRelease):
-            raise SlipkitError(
-                f"closedloop.scene: the DAVIS closed loop needs a DAVIS release scene; "
-                f"got {type(scene.model).__name__}"
-            )
-
-    def conditions(self, scen: DictConfig) -> list[float]:
-        """``lift_s.n`` log-spaced lift times from ``lift_s.lo`` to ``lift_s.hi``, s."""
-        c = scen.lift_s
-        lo, hi, n = float(c.lo), float(c.hi), int(c.n)
-        if not (math.isfinite(lo) and 0 < lo <= hi and math.isfinite(hi) and n >= 1):
-            raise SlipkitError(
-                f"configs/closedloop/davis.yaml lift_s: expected 0 < lo <= hi (s) and n >= 1; "
-                f"got lo={c.lo!r}, hi={c.hi!r}, n={c.n!r}"
-            )
-        return speed_grid(lo, hi, n)
+    def check_plant(self, plant: Mapping[str, Any]) -> None:
+        """Refuse plant parameters outside their declared ranges (:func:`check_plant`)."""
+        check_plant(plant)
 
     def run_trial(
         self,

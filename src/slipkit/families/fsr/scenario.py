@@ -34,7 +34,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from omegaconf import DictConfig
 
 from slipkit._options import within
 from slipkit.closedloop.detectors import Detector
@@ -53,11 +52,11 @@ from slipkit.closedloop.plant import (
     Actuator,
     PinchPlant,
     PlantState,
-    check_grid,
     check_params,
 )
-from slipkit.closedloop.run import Outcome, speed_grid
-from slipkit.closedloop.scenarios import _draw, _span, plant_params, register_scenario
+from slipkit.closedloop.run import Outcome
+from slipkit.closedloop.scenarios import _draw, _span, register_scenario
+from slipkit.closedloop.skeleton import GridScenario
 from slipkit.errors import SlipkitError
 from slipkit.families.fsr.physics import expected_slip_events, voltage_from_force
 from slipkit.families.fsr.scene import FSRProbeSlide
@@ -318,24 +317,19 @@ def check_plant(plant: Mapping[str, Any]) -> None:
 
 
 @register_scenario("fsr")
-class FSRScenario:
+class FSRScenario(GridScenario):
     """The FSR prosthetic hold (module docstring); conditions: the load's rise time, s."""
 
     condition_label = "load rise time (s)"
+    family = "FSR"
+    scene_class = FSRProbeSlide
+    scene_title = "an FSR probe-slide scene"
+    grid_key = "conditions"
+    grid_rule = RISE_S
 
-    def check(self, scen: DictConfig, scene: Scene) -> None:
-        """Refuse bad plant parameters and a scene that is not the FSR probe slide."""
-        check_plant(plant_params(scen))
-        if not isinstance(scene.model, FSRProbeSlide):
-            raise SlipkitError(
-                f"closedloop.scene: the FSR closed loop needs an FSR probe-slide scene; "
-                f"got {type(scene.model).__name__}"
-            )
-
-    def conditions(self, scen: DictConfig) -> list[float]:
-        """``conditions.n`` log-spaced rise times from ``conditions.lo`` to ``conditions.hi``, s."""
-        lo, hi, n = check_grid(dict(scen.conditions), "closedloop.conditions", RISE_S)
-        return speed_grid(lo, hi, n)
+    def check_plant(self, plant: Mapping[str, Any]) -> None:
+        """Refuse plant parameters outside their declared ranges (:func:`check_plant`)."""
+        check_plant(plant)
 
     def run_trial(
         self,

@@ -58,7 +58,8 @@ from slipkit.closedloop.plant import (
     span,
 )
 from slipkit.closedloop.run import Outcome, speed_grid
-from slipkit.closedloop.scenarios import plant_params, register_scenario
+from slipkit.closedloop.scenarios import register_scenario
+from slipkit.closedloop.skeleton import GridScenario
 from slipkit.errors import SlipkitError
 from slipkit.families.sliptack.physics import G_M_S2, natural_frequency
 from slipkit.families.sliptack.scene import SlipTackDrop, SlipTackPull
@@ -645,10 +646,19 @@ def run_sliptack_trial(
 
 
 @register_scenario("sliptack")
-class SlipTackScenario:
+class SlipTackScenario(GridScenario):
     """SlipTack pull (speeds from ``pull_speeds``) and drop (condition 0), regrasp on slip."""
 
     condition_label = "pull speed (mm/s); 0: the drop"
+    family = "SlipTack"
+    scene_class = SlipTackDrop
+    scene_title = "a SlipTack drop scene"
+    grid_key = "pull_speeds"
+    grid_rule = PULL_MM_S
+
+    def check_plant(self, plant: Mapping[str, Any]) -> None:
+        """Refuse plant parameters outside their declared ranges (:func:`check_plant`)."""
+        check_plant(plant)
 
     def __init__(self) -> None:
         self.scenes: dict[str, Scene] = {}
@@ -659,12 +669,8 @@ class SlipTackScenario:
 
         from slipkit.sim.commands import build_scene
 
-        check_plant(plant_params(scen))
-        if not isinstance(scene.model, SlipTackDrop):
-            raise SlipkitError(
-                f"closedloop.scene: the SlipTack closed loop needs a SlipTack drop scene; "
-                f"got {type(scene.model).__name__}"
-            )
+        super().check(scen, scene)
+        assert isinstance(scene.model, SlipTackDrop)
         pull_cfg = compose(
             config_name="train", overrides=[f"scene={scen.pull_scene}"]
         ).scene

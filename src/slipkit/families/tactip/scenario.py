@@ -23,7 +23,6 @@ from functools import cached_property, partial
 from typing import Any
 
 import numpy as np
-from omegaconf import DictConfig
 
 from slipkit._options import within
 from slipkit.closedloop.detectors import Detector
@@ -35,12 +34,12 @@ from slipkit.closedloop.plant import (
     Actuator,
     GraspPlant,
     PlantState,
-    check_grid,
     check_params,
     span,
 )
-from slipkit.closedloop.run import Outcome, speed_grid
-from slipkit.closedloop.scenarios import plant_params, register_scenario
+from slipkit.closedloop.run import Outcome
+from slipkit.closedloop.scenarios import register_scenario
+from slipkit.closedloop.skeleton import GridScenario
 from slipkit.errors import SlipkitError
 from slipkit.families.tactip.physics import normal_force_N
 from slipkit.families.tactip.scene import TacTipGravityDrop, TacTipTrial
@@ -414,25 +413,19 @@ def run_tactip_trial(
 
 
 @register_scenario("tactip")
-class TacTipScenario:
+class TacTipScenario(GridScenario):
     """The TacTip gravity drop (module docstring): retraction speeds, one-shot catch."""
 
     condition_label = "speed (mm/s)"
+    family = "TacTip"
+    scene_class = TacTipGravityDrop
+    scene_title = "a TacTip gravity-drop scene"
+    grid_key = "speeds"
+    grid_rule = SPEED_MM_S
 
-    def check(self, scen: DictConfig, scene: Scene) -> None:
-        """Refuse plant parameters that cannot run and a scene that is not the gravity drop."""
-        check_scenario(plant_params(scen))
-        if not isinstance(scene.model, TacTipGravityDrop):
-            raise SlipkitError(
-                f"closedloop.scene: the TacTip closed loop needs a TacTip gravity-drop "
-                f"scene; got {type(scene.model).__name__}"
-            )
-
-    def conditions(self, scen: DictConfig) -> list[float]:
-        """``speeds.n`` log-spaced retraction speeds from ``speeds.lo`` to ``speeds.hi``, mm/s."""
-        return speed_grid(
-            *check_grid(dict(scen.speeds), "closedloop.speeds", SPEED_MM_S)
-        )
+    def check_plant(self, plant: Mapping[str, Any]) -> None:
+        """Refuse plant parameters that cannot run (:func:`check_scenario`)."""
+        check_scenario(plant)
 
     def run_trial(
         self,
