@@ -130,8 +130,12 @@ def test_killed_worker_study_resumes(tmp_path: Path) -> None:
     complete = _complete(trials)
     assert 2 == len(complete)
     assert [TrialState.FAIL] == [t.state for t in trials if t.number == killed.number]
+    # its parameters as stored (the snapshot taken while it ran may read the params table
+    # before the worker's last suggestion landed, the user attributes after)
+    (failed,) = [t for t in trials if t.number == killed.number]
+    assert killed.params.items() <= failed.params.items()
     retried = [t for t in complete if t.system_attrs.get("failed_trial") is not None]
-    assert [(killed.number, killed.params)] == [
+    assert [(killed.number, failed.params)] == [
         (t.system_attrs["failed_trial"], t.params) for t in retried
     ]
     # The killed trial's run folder was never completed under its final name.
