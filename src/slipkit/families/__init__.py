@@ -174,6 +174,7 @@ FAMILIES: dict[str, Family] = {
             deploys=(_DETECT,),
             compares=(_DETECT,),
             exporters=("slipkit.families.gelsight.export",),
+            scenes=("gelsight_grasp",),
             docs=("families/gelsight.md",),
         ),
     )
@@ -201,7 +202,7 @@ PLUGIN_MODULES: dict[str, tuple[str, ...]] = {
     "deployers": (_ST + "deploy",),
     "adapters": (_ST + "adapter",),
     "scenarios": (_ST + "scenario", _FSR + "scenario"),
-    "effects": (_ST + "effects", _FSR + "effects"),
+    "effects": (_ST + "effects", _FSR + "effects", "slipkit.families.gelsight.effects"),
     "tasks": (_ST + "task",),
 }
 
