@@ -3,13 +3,17 @@ other set's every trial, beside that set's own nested CV."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
 pytest.importorskip("cv2")
 
 import slipkit.families.gelsight.effects  # noqa: F401  (registers the effects)
+from slipkit.errors import SlipkitError
 from slipkit.families.gelsight.report import load_trials
+from slipkit.families.gelsight.report import run as report_run
 from slipkit.families.gelsight.scene import GelSightGrasp
 from slipkit.families.gelsight.sim2real import run, sim_to_real
 from slipkit.sim.core import Scene
@@ -27,6 +31,7 @@ def simulated(seed: int, n: int = 30, **kw: object):  # type: ignore[no-untyped-
     return Scene("g", model, fx).simulate(n, seed)
 
 
+@pytest.mark.slow
 def test_a_detector_chosen_on_simulation_separates_another_simulated_set() -> None:
     sim, other = simulated(0), simulated(1)
     res = sim_to_real(
@@ -39,8 +44,17 @@ def test_a_detector_chosen_on_simulation_separates_another_simulated_set() -> No
 
 def test_run_reports_both_sides_over_seeds() -> None:
     sims = [simulated(0, 30), simulated(1, 30)]
-    res = run(simulated(2, 30), sims, [0, 1], ["majority"])
+    real = simulated(2, 30)
+    res = run(real, sims, [0, 1], ["majority", "clip_length"])
     row = res["results"]["majority"]
     assert row["sim"]["balanced_accuracy"] == {"mean": 0.5, "sd": 0.0}
     assert np.isfinite(row["real"]["balanced_accuracy"]["mean"])
     assert len(row["per_seed"]["sim"]) == 2
+    # the trained-on-real column read from the report's JSON is the one computed
+    reported = json.loads(json.dumps(report_run(real, [0, 1], ["clip_length"])))
+    again = run(real, sims, [0, 1], ["clip_length"], real_report=reported)
+    assert (
+        again["results"]["clip_length"]["real"] == res["results"]["clip_length"]["real"]
+    )
+    with pytest.raises(SlipkitError, match="seed 2"):
+        run(real, sims[:1], [2], ["clip_length"], real_report=reported)

@@ -293,6 +293,7 @@ def run(
         "trials": len(y),
         "slip": int(y.sum()),
         "objects": len(set(g)),
+        "seeds": [int(s) for s in seeds],
     }
     rows: dict[str, Any] = {}
     for cand in candidates(0, arm):

@@ -75,6 +75,19 @@ def sim_to_real(
     return {**pooled(fired, first, ry), "chosen": label}
 
 
+def _reported(report: dict[str, Any], name: str, seed: int) -> dict[str, Any]:
+    """One seed's result of ``name`` in a report's JSON (``report --out``)."""
+    seeds = report.get("seeds")
+    row = report.get("results", {}).get(name)
+    if seeds is None or row is None or seed not in seeds:
+        raise SlipkitError(
+            f"--real-report: no result of {name!r} for seed {seed} "
+            f"(seeds {seeds}, detectors {sorted(report.get('results', {}))})"
+        )
+    result: dict[str, Any] = row["per_seed"][seeds.index(seed)]
+    return result
+
+
 def _stat(values: Sequence[float]) -> dict[str, float]:
     v = np.asarray(values, dtype=np.float64)
     if not np.isfinite(v).any():
@@ -89,8 +102,12 @@ def run(
     names: Sequence[str] | None = None,
     *,
     arm: int = 12,
+    real_report: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """Every candidate over ``seeds``: trained on simulation and on real, side by side."""
+    """Every candidate over ``seeds``: trained on simulation and on real, side by side.
+
+    ``real_report``: the report's results on ``real`` (``report --out``, same seeds),
+    read for the trained-on-real column instead of running the nested CV again."""
     if len(sims) not in (1, len(seeds)):
         raise SlipkitError(
             f"--sim: give one simulated set or one per seed ({len(seeds)}); got {len(sims)}"
@@ -110,6 +127,9 @@ def run(
             on_sim.append(
                 sim_to_real(cand.name, loaded, real_trials, seed=seed, arm=arm)
             )
+            if real_report is not None:
+                on_real.append(_reported(real_report, cand.name, seed))
+                continue
             c = next(c for c in candidates(seed, arm) if c.name == cand.name)
             on_real.append(evaluate(c, rt, ry, rg, seed=seed))
         rows[cand.name] = {
@@ -163,11 +183,24 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--only", nargs="*", help="detector names (default: all)")
     ap.add_argument("--out", help="write the results as JSON here")
     ap.add_argument("--arm", type=int, default=12, help="as the report's --arm")
+    ap.add_argument(
+        "--real-report",
+        help="the report's JSON on --real (report --out, same seeds and --arm): "
+        "read the trained-on-real column from it instead of recomputing",
+    )
     args = ap.parse_args(argv)
     real = load_dataset(args.real)
     sims = [load_dataset(p) for p in args.sim]
     print(HEADER)
-    res = run(real, sims, args.seeds, args.only, arm=args.arm)
+    reported = None
+    if args.real_report:
+        reported = json.loads(Path(args.real_report).read_text())
+        if reported.get("trials") != len(real.trials):
+            raise SlipkitError(
+                f"{args.real_report}: {reported.get('trials')} trials, --real has "
+                f"{len(real.trials)}: not the report of this dataset"
+            )
+    res = run(real, sims, args.seeds, args.only, arm=args.arm, real_report=reported)
     if args.out:
         out = Path(args.out)
         tmp = out.with_suffix(out.suffix + ".tmp")
