@@ -174,7 +174,7 @@ FAMILIES: dict[str, Family] = {
             deploys=(_DETECT,),
             compares=(_DETECT,),
             exporters=("slipkit.families.gelsight.export",),
-            scenes=("gelsight_grasp",),
+            scenes=("gelsight_grasp", "gelsight_grasp_setdown"),
             docs=("families/gelsight.md",),
         ),
     )
