@@ -56,5 +56,7 @@ def test_run_reports_both_sides_over_seeds() -> None:
     assert (
         again["results"]["clip_length"]["real"] == res["results"]["clip_length"]["real"]
     )
+    skipped = run(real, sims[:1], [0], ["majority"], skip_real=True)
+    assert np.isnan(skipped["results"]["majority"]["real"]["balanced_accuracy"]["mean"])
     with pytest.raises(SlipkitError, match="seed 2"):
         run(real, sims[:1], [2], ["clip_length"], real_report=reported)

@@ -103,11 +103,13 @@ def run(
     *,
     arm: int = 12,
     real_report: dict[str, Any] | None = None,
+    skip_real: bool = False,
 ) -> dict[str, Any]:
     """Every candidate over ``seeds``: trained on simulation and on real, side by side.
 
     ``real_report``: the report's results on ``real`` (``report --out``, same seeds),
-    read for the trained-on-real column instead of running the nested CV again."""
+    read for the trained-on-real column instead of running the nested CV again;
+    ``skip_real``: leave that column out (NaN)."""
     if len(sims) not in (1, len(seeds)):
         raise SlipkitError(
             f"--sim: give one simulated set or one per seed ({len(seeds)}); got {len(sims)}"
@@ -127,6 +129,8 @@ def run(
             on_sim.append(
                 sim_to_real(cand.name, loaded, real_trials, seed=seed, arm=arm)
             )
+            if skip_real:
+                continue
             if real_report is not None:
                 on_real.append(_reported(real_report, cand.name, seed))
                 continue
@@ -135,7 +139,7 @@ def run(
         rows[cand.name] = {
             "kind": cand.kind,
             "sim": {k: _stat([r[k] for r in on_sim]) for k in KEYS},
-            "real": {k: _stat([r[k] for r in on_real]) for k in KEYS},
+            "real": {k: _stat([r[k] for r in on_real] or [math.nan]) for k in KEYS},
             "sim_chosen": [r["chosen"] for r in on_sim],
             "per_seed": {"sim": on_sim, "real": on_real},
         }
@@ -187,6 +191,11 @@ def main(argv: Sequence[str] | None = None) -> None:
         "--real-report",
         help="the report's JSON on --real (report --out, same seeds and --arm): "
         "read the trained-on-real column from it instead of recomputing",
+    )
+    ap.add_argument(
+        "--skip-real",
+        action="store_true",
+        help="leave the trained-on-real column out (the report gives it)",
     )
     args = ap.parse_args(argv)
     real = load_dataset(args.real)
