@@ -4,6 +4,7 @@ other set's every trial, beside that set's own nested CV."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,11 +12,12 @@ import pytest
 pytest.importorskip("cv2")
 
 import slipkit.families.gelsight.effects  # noqa: F401  (registers the effects)
+from slipkit.data.io import save_dataset
 from slipkit.errors import SlipkitError
 from slipkit.families.gelsight.report import load_trials
 from slipkit.families.gelsight.report import run as report_run
 from slipkit.families.gelsight.scene import GelSightGrasp
-from slipkit.families.gelsight.sim2real import run, sim_to_real
+from slipkit.families.gelsight.sim2real import main, run, sim_to_real
 from slipkit.sim.core import Scene
 
 
@@ -40,6 +42,17 @@ def test_a_detector_chosen_on_simulation_separates_another_simulated_set() -> No
     assert res["balanced_accuracy"] > 0.8
     majority = sim_to_real("majority", load_trials(sim), load_trials(other), seed=0)
     assert majority["balanced_accuracy"] == 0.5
+
+
+def test_the_command_can_leave_the_real_column_out(tmp_path: Path) -> None:
+    data = save_dataset(simulated(0, 12), tmp_path / "sim")
+    out = tmp_path / "res.json"
+    main(
+        ["--real", str(data), "--sim", str(data), "--seeds", "0"]
+        + ["--only", "majority", "--skip-real", "--out", str(out)]
+    )
+    res = json.loads(out.read_text().replace("NaN", "null"))
+    assert res["results"]["majority"]["real"]["balanced_accuracy"]["mean"] is None
 
 
 def test_run_reports_both_sides_over_seeds() -> None:

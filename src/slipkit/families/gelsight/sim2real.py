@@ -209,7 +209,15 @@ def main(argv: Sequence[str] | None = None) -> None:
                 f"{args.real_report}: {reported.get('trials')} trials, --real has "
                 f"{len(real.trials)}: not the report of this dataset"
             )
-    res = run(real, sims, args.seeds, args.only, arm=args.arm, real_report=reported)
+    res = run(
+        real,
+        sims,
+        args.seeds,
+        args.only,
+        arm=args.arm,
+        real_report=reported,
+        skip_real=args.skip_real,
+    )
     if args.out:
         out = Path(args.out)
         tmp = out.with_suffix(out.suffix + ".tmp")
