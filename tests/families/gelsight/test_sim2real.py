@@ -47,10 +47,8 @@ def test_a_detector_chosen_on_simulation_separates_another_simulated_set() -> No
 def test_the_command_can_leave_the_real_column_out(tmp_path: Path) -> None:
     data = save_dataset(simulated(0, 12), tmp_path / "sim")
     out = tmp_path / "res.json"
-    main(
-        ["--real", str(data), "--sim", str(data), "--seeds", "0"]
-        + ["--only", "majority", "--skip-real", "--out", str(out)]
-    )
+    args = ["--real", str(data), "--sim", str(data), "--seeds", "0", "--only"]
+    main([*args, "majority", "--skip-real", "--out", str(out)])
     res = json.loads(out.read_text().replace("NaN", "null"))
     assert res["results"]["majority"]["real"]["balanced_accuracy"]["mean"] is None
 
