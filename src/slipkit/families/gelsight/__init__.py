@@ -1,4 +1,4 @@
-"""The GelSight family: marker tracking, pin-motion features, streaming detectors."""
+"""The GelSight family: marker tracking and import, pin-field features, streaming detectors and their report, their exporter, a simulated grasp scene and its sim-to-real check."""
 
 from slipkit.families import DETECTION_TASK, Family
 
@@ -11,5 +11,7 @@ FAMILY = Family(
     deploys=(DETECTION_TASK,),
     compares=(DETECTION_TASK,),
     exporters=(_F + "export",),
+    scenes=("gelsight_grasp", "gelsight_grasp_setdown"),
     docs=("families/gelsight.md",),
+    plugins={"effects": (_F + "effects",)},
 )

@@ -209,6 +209,49 @@ def _ba(fired: np.ndarray, y: np.ndarray) -> float:
     return float((fired[y == 1].mean() + (~fired[y == 0]).mean()) / 2)
 
 
+def choose_setting(
+    cand: Candidate,
+    trials: Sequence[Trial],
+    y: np.ndarray,
+    g: np.ndarray,
+    *,
+    seed: int,
+    inner: int = 4,
+) -> tuple[str, Any]:
+    """The setting of ``cand`` with the best balanced accuracy on out-of-fold trial
+    scores of an inner group k-fold over ``trials``, refitted on all of them, its
+    threshold chosen on those out-of-fold scores: (setting label, fitted detector)."""
+    best: tuple[float, str, Factory, float] | None = None
+    for label, factory in cand.settings:
+        s = _oof_scores(factory, trials, y, g, inner, seed)
+        thr = choose_threshold(s.tolist(), y.tolist())
+        ba = _ba(s >= thr, y)
+        if best is None or ba > best[0]:
+            best = (ba, label, factory, thr)
+    assert best is not None
+    _, label, factory, thr = best
+    det = factory().fit(list(trials), y)
+    det.threshold_ = thr
+    return label, det
+
+
+def pooled(fired: np.ndarray, first: np.ndarray, y: np.ndarray) -> dict[str, float]:
+    """Balanced accuracy, slip recall, wiggle false alarms and the median first-alarm
+    frames of trial calls ``fired`` (first alarm frame ``first``, NaN: none)."""
+    slip, wig = y == 1, y == 0
+    return {
+        "balanced_accuracy": _ba(fired, y),
+        "slip_recall": float(fired[slip].mean()),
+        "wiggle_false_alarm": float(fired[wig].mean()),
+        "first_alarm_frame_slip": float(np.nanmedian(first[slip & fired]))
+        if (slip & fired).any()
+        else math.nan,
+        "first_alarm_frame_wiggle": float(np.nanmedian(first[wig & fired]))
+        if (wig & fired).any()
+        else math.nan,
+    }
+
+
 def evaluate(
     cand: Candidate,
     trials: Sequence[Trial],
@@ -225,32 +268,6 @@ def evaluate(
     return _score_folds(cand, trials, y, g, folds, seed=seed, inner=inner)
 
 
-def _fit_best(
-    cand: Candidate,
-    trials: Sequence[Trial],
-    y: np.ndarray,
-    g: np.ndarray,
-    tr: np.ndarray,
-    *,
-    seed: int,
-    inner: int,
-) -> tuple[Any, str]:
-    """The setting of best inner-CV balanced accuracy on the trials ``tr``, refitted
-    on them with the threshold chosen on their out-of-fold scores."""
-    best: tuple[float, str, Factory, float] | None = None
-    for label, factory in cand.settings:
-        s = _oof_scores(factory, [trials[i] for i in tr], y[tr], g[tr], inner, seed)
-        thr = choose_threshold(s.tolist(), y[tr].tolist())
-        ba = _ba(s >= thr, y[tr])
-        if best is None or ba > best[0]:
-            best = (ba, label, factory, thr)
-    assert best is not None
-    _, label, factory, thr = best
-    det = factory().fit([trials[i] for i in tr], y[tr])
-    det.threshold_ = thr
-    return det, label
-
-
 def _score_folds(
     cand: Candidate,
     trials: Sequence[Trial],
@@ -261,34 +278,23 @@ def _score_folds(
     seed: int,
     inner: int,
 ) -> dict[str, Any]:
-    """Fit on each fold's training trials (:func:`_fit_best`), score its test trials
+    """Fit on each fold's training trials (:func:`choose_setting`), score its test trials
     once; the pooled test trials' rates."""
     scored = np.zeros(len(y), dtype=bool)
     fired = np.zeros(len(y), dtype=bool)
     first = np.full(len(y), np.nan)
     chosen: list[str] = []
     for tr, te in folds:
-        det, label = _fit_best(cand, trials, y, g, tr, seed=seed, inner=inner)
+        label, det = choose_setting(
+            cand, [trials[i] for i in tr], y[tr], g[tr], seed=seed, inner=inner
+        )
         chosen.append(label)
         for i in te:
             a = det.alarm(trials[i])
             scored[i] = True
             fired[i] = a is not None
             first[i] = np.nan if a is None else a
-    y = np.where(scored, y, -1)
-    slip, wig = y == 1, y == 0
-    return {
-        "balanced_accuracy": _ba(fired[y >= 0], y[y >= 0]),
-        "slip_recall": float(fired[slip].mean()),
-        "wiggle_false_alarm": float(fired[wig].mean()),
-        "first_alarm_frame_slip": float(np.nanmedian(first[slip & fired]))
-        if (slip & fired).any()
-        else math.nan,
-        "first_alarm_frame_wiggle": float(np.nanmedian(first[wig & fired]))
-        if (wig & fired).any()
-        else math.nan,
-        "chosen": chosen,
-    }
+    return {**pooled(fired[scored], first[scored], y[scored]), "chosen": chosen}
 
 
 def _nan_stat(fn: Callable[..., Any], values: Sequence[float]) -> float:
@@ -310,6 +316,7 @@ def run(
         "trials": len(y),
         "slip": int(y.sum()),
         "objects": len(set(g)),
+        "seeds": [int(s) for s in seeds],
     }
     rows: dict[str, Any] = {}
     for cand in candidates(0, arm):
