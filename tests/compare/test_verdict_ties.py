@@ -198,3 +198,26 @@ def test_the_verdict_holds_under_timing_noise() -> None:
         ]
         chosen.add(choose_deploy(build_table(rows, "cost")).row["estimator"])
     assert {"a"} == chosen
+
+
+def test_p99s_within_the_seeds_spread_do_not_break_a_tie() -> None:
+    """Equal trial events; p99 55 +- 23 us against 38 +- 8 us (a shared machine's draw:
+    the first swung between seeds): one timing, the comparison's order decides. With a
+    tight spread the same gap is a cheaper frame and wins."""
+    for p99_a, p99_b in ((55.3, 38.3), (38.3, 55.3)):
+        rows = [
+            _row("fsr_onset", 0.38, 0.26, 34.7, p99=p99_a, p99_us_std=23.5),
+            _row("fsr_onset_logistic", 0.38, 0.26, 34.7, p99=p99_b, p99_us_std=7.5),
+        ]
+        choice = choose_deploy(build_table(rows, "cost"))
+        assert "fsr_onset" == choice.row["estimator"]
+        assert "the comparison's order (every tie-breaker equal)" == choice.tie_break
+    rows = [
+        _row("fsr_onset", 0.38, 0.26, 34.7, p99=55.3, p99_us_std=2.0),
+        _row("fsr_onset_logistic", 0.38, 0.26, 34.7, p99=38.3, p99_us_std=1.5),
+    ]
+    choice = choose_deploy(build_table(rows, "cost"))
+    assert "fsr_onset_logistic" == choice.row["estimator"]
+    assert choice.tie_break.startswith(
+        "cheaper per frame (p99) (38.3 us against 55.3 us"
+    )

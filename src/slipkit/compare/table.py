@@ -498,11 +498,29 @@ def _table_first(rows: Sequence[pd.Series]) -> pd.Series:
     return rows[0]
 
 
+def _same_p99(row: pd.Series, p99: float, rows: Sequence[pd.Series]) -> bool:
+    """Whether ``row``'s p99 is one timing with the lowest of ``rows``: within
+    :data:`P99_TIE` of it, or no further from it than the larger spread over seeds of
+    the two (``p99_us_std``): a detector whose p99 swings between seeds on a shared
+    machine is not slower for one run's draw."""
+    if not math.isfinite(p99):
+        return False
+    vals = [(_value(r, "p99_us"), r) for r in rows]
+    low, fastest = min(
+        ((v, r) for v, r in vals if math.isfinite(v)), key=lambda t: t[0]
+    )
+    if p99 <= low * P99_TIE:
+        return True
+    spread = max(_value(row, "p99_us_std"), _value(fastest, "p99_us_std"))
+    return math.isfinite(spread) and p99 - low <= spread
+
+
 def break_tie(rows: Sequence[pd.Series]) -> tuple[pd.Series, str]:
     """The row that wins a tie by :data:`TIE_BREAKERS`, and what broke it.
 
     Each breaker in turn keeps the rows of the lowest value (a row without the value
-    loses to one with it; p99s within :data:`P99_TIE` of the lowest count as equal);
+    loses to one with it; p99s within :data:`P99_TIE` of the lowest, or within the
+    seeds' spread of it, count as equal: :func:`_same_p99`);
     the first breaker that leaves fewer rows is named, e.g. ``lower delay (12 ms
     against 30 ms for `b`)``. Rows still equal after every breaker: the first in the
     comparison's order, so two runs choose the same row whatever their timings.
@@ -515,14 +533,12 @@ def break_tie(rows: Sequence[pd.Series]) -> tuple[pd.Series, str]:
         if not finite:
             continue
         low = min(finite)
-        top = low * P99_TIE if column == "p99_us" else low
-        keep = [
-            r for r, v in zip(left, vals, strict=True) if math.isfinite(v) and v <= top
-        ]
+        if column == "p99_us":
+            keep = [r for r, v in zip(left, vals, strict=True) if _same_p99(r, v, left)]
+        else:
+            keep = [r for r, v in zip(left, vals, strict=True) if v <= low]
         if len(keep) < len(left) and not named:
-            runner = next(
-                (r for r, v in zip(left, vals, strict=True) if not v <= top), left[0]
-            )
+            runner = next((r for r in left if not any(r is k for k in keep)), left[0])
             other = _value(runner, column)
             named = (
                 f"{what} ({_shown(low, unit)} against {_shown(other, unit)} for "
