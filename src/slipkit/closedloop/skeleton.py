@@ -8,6 +8,7 @@ sensor frame from its state, the controller).
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
@@ -21,7 +22,7 @@ from slipkit.errors import SlipkitError
 from slipkit.sim.core import Scene
 
 
-class GridScenario:
+class GridScenario(ABC):
     """A scenario on one scene class whose conditions are a log-spaced grid.
 
     Attributes (class level)
@@ -47,9 +48,9 @@ class GridScenario:
     grid_key: ClassVar[str]
     grid_rule: ClassVar[Rule]
 
+    @abstractmethod
     def check_plant(self, plant: Mapping[str, Any]) -> None:
         """Refuse plant parameters outside their declared ranges (the family's rules)."""
-        raise NotImplementedError
 
     def check(self, scen: DictConfig, scene: Scene) -> None:
         """Refuse bad plant parameters and a scene of another class."""

@@ -498,17 +498,14 @@ def _table_first(rows: Sequence[pd.Series]) -> pd.Series:
     return rows[0]
 
 
-def _same_p99(row: pd.Series, p99: float, rows: Sequence[pd.Series]) -> bool:
-    """Whether ``row``'s p99 is one timing with the lowest of ``rows``: within
+def _same_p99(row: pd.Series, p99: float, fastest: pd.Series) -> bool:
+    """Whether ``row``'s p99 is one timing with the ``fastest`` row's: within
     :data:`P99_TIE` of it, or no further from it than the larger spread over seeds of
     the two (``p99_us_std``): a detector whose p99 swings between seeds on a shared
     machine is not slower for one run's draw."""
+    low = _value(fastest, "p99_us")
     if not math.isfinite(p99):
         return False
-    vals = [(_value(r, "p99_us"), r) for r in rows]
-    low, fastest = min(
-        ((v, r) for v, r in vals if math.isfinite(v)), key=lambda t: t[0]
-    )
     if p99 <= low * P99_TIE:
         return True
     spread = max(_value(row, "p99_us_std"), _value(fastest, "p99_us_std"))
@@ -534,7 +531,10 @@ def break_tie(rows: Sequence[pd.Series]) -> tuple[pd.Series, str]:
             continue
         low = min(finite)
         if column == "p99_us":
-            keep = [r for r, v in zip(left, vals, strict=True) if _same_p99(r, v, left)]
+            fastest = left[vals.index(low)]
+            keep = [
+                r for r, v in zip(left, vals, strict=True) if _same_p99(r, v, fastest)
+            ]
         else:
             keep = [r for r, v in zip(left, vals, strict=True) if v <= low]
         if len(keep) < len(left) and not named:
