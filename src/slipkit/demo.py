@@ -37,6 +37,7 @@ import contextlib
 import io
 import json
 import math
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -53,6 +54,7 @@ from slipkit._files import (
     atomic_write_text,
     check_out_path,
     first_line,
+    manifest_kind,
 )
 from slipkit.data.io import load_dataset, save_dataset
 from slipkit.errors import SlipkitError
@@ -289,6 +291,22 @@ def export_dir(out: Path, family: str, *, recommended: bool) -> Path:
     return base / family if recommended else base / NOT_RECOMMENDED / family
 
 
+def clear_family_bundles(out: Path, family: str) -> list[Path]:
+    """Remove the bundles an earlier demo into ``out`` left for ``family``, in
+    ``exports/<family>`` and ``exports/not_recommended/<family>`` (with their
+    ``.export.log``), so a family whose recommendation changed between runs keeps no
+    bundle under the other verdict. Only slipkit bundles are removed; anything else
+    at those paths is left for the export to refuse. Returns the removed folders."""
+    removed = []
+    for recommended in (True, False):
+        where = export_dir(out, family, recommended=recommended)
+        if manifest_kind(where) == "bundle":
+            shutil.rmtree(where)
+            where.with_name(f"{where.name}.export.log").unlink(missing_ok=True)
+            removed.append(where)
+    return removed
+
+
 def demo_main(cfg: DictConfig) -> Path:
     """Run the whole pipeline; print the index report's path last and return it."""
     from tqdm import tqdm
@@ -433,6 +451,7 @@ def demo_main(cfg: DictConfig) -> Path:
     for family, res in tqdm(
         list(results.items()), desc="4/7 export best", unit="family", disable=not show
     ):
+        clear_family_bundles(out, family)
         # the comparison report's own rule (one function): within budget, else shown only
         # (and the comparison's verdict limits, e.g. the FSR disturbance rate)
         node = OmegaConf.to_container(plan[family].comparison, resolve=True)

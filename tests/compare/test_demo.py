@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -309,3 +310,34 @@ def test_a_failing_closed_loop_scenario_costs_its_columns_not_the_demo(
         "closed loop tactip failed (see the demo's stderr)",
     ) == (row[1].strip(), row[6].strip(), row[7].strip(), row[9].strip())
     assert "closed loop tactip: skipped: parity check failed for fsr_robust" in err
+
+
+def test_a_rerun_clears_the_familys_bundle_under_the_other_verdict(
+    tmp_path: Path,
+) -> None:
+    # a bundle from an earlier run: recommended then, not recommended now (or the
+    # other way round); the export writes one place, so the other must not keep it
+    from slipkit._files import BUNDLE_FORMAT
+    from slipkit.demo import clear_family_bundles, export_dir
+
+    out = tmp_path / "demo"
+    for recommended in (True, False):
+        b = export_dir(out, "fsr", recommended=recommended)
+        b.mkdir(parents=True)
+        (b / "manifest.json").write_text(json.dumps({"format": BUNDLE_FORMAT}))
+        b.with_name(f"{b.name}.export.log").write_text("log\n")
+    other = export_dir(out, "tactip", recommended=True)
+    other.mkdir(parents=True)
+    (other / "manifest.json").write_text(json.dumps({"format": BUNDLE_FORMAT}))
+    mine = export_dir(out, "davis", recommended=False)
+    mine.mkdir(parents=True)
+    (mine / "notes.txt").write_text("a user's folder, not a bundle\n")
+
+    removed = clear_family_bundles(out, "fsr")
+    assert sorted(removed) == sorted(
+        export_dir(out, "fsr", recommended=r) for r in (True, False)
+    )
+    assert not any((out / "exports").rglob("fsr*"))
+    assert clear_family_bundles(out, "davis") == []
+    assert (mine / "notes.txt").is_file()
+    assert (other / "manifest.json").is_file()
