@@ -107,10 +107,27 @@ def test_contact_candidates_stay_armed_at_contact_whatever_the_report_arm() -> N
     from slipkit.families.gelsight.report import CONTACT_ARMS, candidates
 
     cands = {c.name: c for c in candidates(0, arm=50)}
-    for name in ("divergence_contact", "contact_motion"):
+    for name in ("divergence_contact", "contact_motion", "contact_logistic"):
         arms = {factory().arm for _, factory in cands[name].settings}
         assert arms <= set(CONTACT_ARMS)
     assert {f().arm for _, f in cands["pin_motion"].settings} == {50}
     horizons = {f().horizon for _, f in cands["contact_motion"].settings}
     assert None in horizons
     assert len(horizons) > 1
+
+
+def test_the_learned_contact_detector_watches_only_its_horizon() -> None:
+    from slipkit.families.gelsight.report import candidates
+
+    cands = {c.name: c for c in candidates(0)}
+    dets = [f() for _, f in cands["contact_logistic"].settings]
+    assert {d.horizon for d in dets} == {100, 200}
+    rng = np.random.default_rng(0)
+    frames = np.cumsum(rng.normal(0, 0.3, (400, 60)), axis=0) + np.tile(
+        np.r_[np.arange(30) % 6 * 30.0, np.arange(30) // 6 * 30.0], (400, 1)
+    )
+    trial = {"camera_0": frames}
+    det = dets[0].fit([trial, {"camera_0": frames[::-1].copy()}], [1, 0])
+    s = det.frame_scores(trial)
+    assert np.isfinite(s[det.arm + 10 : det.arm + det.horizon]).all()
+    assert np.isnan(s[det.arm + det.horizon :]).all()

@@ -21,7 +21,8 @@ fingertip to agree (an object sliding out moves both gels; a wiggle can twist on
   and returns does little of).
 * :class:`WindowModelDetector` -- logistic regression (or an RBF SVM) on the window's
   deformation features (:mod:`slipkit.families.gelsight.features`); training frames
-  carry their trial's label, weighted so each trial and class counts once.
+  carry their trial's label, weighted so each trial and class counts once. Armed at
+  contact with a ``horizon``, it is the learned form of the contact-phase detector.
 * :class:`TacTipVelocityDetector` -- the TacTip paper's Gaussian SVM on pin-velocity
   features (:class:`slipkit.models.svm.TacTipSVM`, pooled statistics so any pin count
   works), its decision averaged over the last ``smooth`` frames.
@@ -244,8 +245,9 @@ class WindowModelDetector(_Detector):
         step: int = 5,
         top: float = 1.0,
         seed: int = 0,
+        horizon: int | None = None,
     ):
-        super().__init__(window=window, arm=arm)
+        super().__init__(window=window, arm=arm, horizon=horizon)
         self.top = float(top)
         if model not in ("logistic", "svm"):
             raise SlipkitError(f"model={model!r}: expected 'logistic' or 'svm'")

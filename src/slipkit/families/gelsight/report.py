@@ -18,7 +18,7 @@ on the run's training objects, its test objects scored once) and prints each run
 test trial events beside them: the controls next to a deployed detector.
 
 ``--arm`` sets when the whole-recording detectors are armed; the contact-phase ones
-(``divergence_contact``, ``contact_motion``) are armed at :data:`CONTACT_ARMS`, so their
+(``divergence_contact``, ``contact_motion``, ``contact_logistic``) are armed at :data:`CONTACT_ARMS`, so their
 displacement reference is the start of contact.
 """
 
@@ -120,6 +120,27 @@ def candidates(seed: int, arm: int = 12) -> list[Candidate]:
                 for c in (0.01, 1.0)
                 for w in (25, 50)
                 for top in (1.0, 0.1)
+            ),
+        ),
+        Candidate(
+            "contact_logistic",
+            tuple(
+                (
+                    f"C{c} top{top} h{h}",
+                    partial(
+                        WindowModelDetector,
+                        C=c,
+                        window=50,
+                        top=top,
+                        arm=CONTACT_ARMS[0],
+                        horizon=h,
+                        step=3,
+                        seed=seed,
+                    ),
+                )
+                for c in (0.01, 1.0)
+                for top in (1.0, 0.2)
+                for h in (100, 200)
             ),
         ),
         Candidate(
