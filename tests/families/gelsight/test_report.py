@@ -62,6 +62,46 @@ def test_the_clip_length_control_reads_what_a_streaming_detector_must_not() -> N
         inner=2,
     )
     assert r["balanced_accuracy"] == 1.0
+    # no trial runs the full length of the longest, the slip ones stop early: no
+    # score on full-length clips alone (one class there)
+    assert np.isnan(r["balanced_accuracy_full_length"])
+
+
+def test_full_length_clips_are_scored_alone_where_clip_length_says_nothing() -> None:
+    from slipkit.families.gelsight.report import full_length
+
+    # half the slips stop early (the object dropped), the other half run the full
+    # length beside the wiggles: on those, the clip-length control is at chance
+    trials, y, g = _data({True: 120, False: 120})
+    rng = np.random.default_rng(1)
+    for i in np.flatnonzero(y == 1)[::2]:
+        trials[i] = _trial(rng, True, 60)
+    full = full_length(trials)
+    assert full.sum() == len(y) - (y == 1).sum() // 2
+    length = evaluate(
+        Candidate("len", (("", ClipLengthControl),)),
+        trials,
+        y,
+        g,
+        seed=0,
+        outer=3,
+        inner=2,
+    )
+    assert length["balanced_accuracy"] == 0.75
+    assert length["balanced_accuracy_full_length"] == 0.5
+    steady = evaluate(
+        Candidate(
+            "steady",
+            (("w25", lambda: PinMotionDetector(quantity="steady", window=25)),),
+        ),
+        trials,
+        y,
+        g,
+        seed=0,
+        outer=3,
+        inner=2,
+    )
+    assert steady["balanced_accuracy_full_length"] == 1.0
 
 
 def test_learned_detectors_score_frames_after_arming_and_separate_drift_from_shakes() -> (

@@ -9,8 +9,10 @@ threshold of best balanced accuracy on them (:func:`~slipkit.families.gelsight.d
 and that balanced accuracy. The best setting is refitted on the whole training side,
 its threshold taken from the out-of-fold scores, and the held-out objects' trials are
 scored once. Per seed the held-out trials of all folds are pooled: balanced accuracy
-(trial = slip when the detector ever fires), slip recall, wiggle false-alarm rate and
-the frame of first alarm; the table gives mean and sd over seeds.
+(trial = slip when the detector ever fires), the same on the full-length trials alone
+(recordings that did not stop early, where clip length carries no label), slip
+recall, wiggle false-alarm rate and the frame of first alarm; the table gives mean and
+sd over seeds.
 
 ``--split-of RUN [RUN ...]`` scores instead on the train / test split of ``slipkit
 train`` run folders (one per seed: the setting and threshold chosen by inner group CV
@@ -256,12 +258,30 @@ def choose_setting(
     return label, det
 
 
-def pooled(fired: np.ndarray, first: np.ndarray, y: np.ndarray) -> dict[str, float]:
+def full_length(trials: Sequence[Trial]) -> np.ndarray:
+    """Which trials run as long as the longest one: the recordings that did not stop
+    early, where clip length says nothing about the label."""
+    n = np.array([max(len(f) for f in t.values()) for t in trials])
+    return n >= n.max()
+
+
+def pooled(
+    fired: np.ndarray,
+    first: np.ndarray,
+    y: np.ndarray,
+    full: np.ndarray | None = None,
+) -> dict[str, float]:
     """Balanced accuracy, slip recall, wiggle false alarms and the median first-alarm
-    frames of trial calls ``fired`` (first alarm frame ``first``, NaN: none)."""
+    frames of trial calls ``fired`` (first alarm frame ``first``, NaN: none); with
+    ``full`` (:func:`full_length`), the balanced accuracy on full-length trials alone
+    (NaN without both classes among them)."""
     slip, wig = y == 1, y == 0
+    ba_full = math.nan
+    if full is not None and len(set(y[full].tolist())) == 2:
+        ba_full = _ba(fired[full], y[full])
     return {
         "balanced_accuracy": _ba(fired, y),
+        "balanced_accuracy_full_length": ba_full,
         "slip_recall": float(fired[slip].mean()),
         "wiggle_false_alarm": float(fired[wig].mean()),
         "first_alarm_frame_slip": float(np.nanmedian(first[slip & fired]))
@@ -315,7 +335,11 @@ def _score_folds(
             scored[i] = True
             fired[i] = a is not None
             first[i] = np.nan if a is None else a
-    return {**pooled(fired[scored], first[scored], y[scored]), "chosen": chosen}
+    full = full_length(trials)
+    return {
+        **pooled(fired[scored], first[scored], y[scored], full[scored]),
+        "chosen": chosen,
+    }
 
 
 def _nan_stat(fn: Callable[..., Any], values: Sequence[float]) -> float:
@@ -401,6 +425,7 @@ def run_split(
         per_run.append(
             {
                 "balanced_accuracy": (recall + 1.0 - early) / 2,
+                "balanced_accuracy_full_length": math.nan,
                 "slip_recall": recall,
                 "wiggle_false_alarm": early,
                 "first_alarm_frame_slip": math.nan,
@@ -437,10 +462,13 @@ def run_split(
 
 def _row(name: str, r: dict[str, Any]) -> str:
     def ms(k: str, d: int = 2) -> str:
+        if not math.isfinite(r[k]["mean"]):
+            return "n/a"
         return f"{r[k]['mean']:.{d}f} +- {r[k]['sd']:.{d}f}"
 
     return (
-        f"| {name} | {r['kind']} | {ms('balanced_accuracy')} | {ms('slip_recall')} | "
+        f"| {name} | {r['kind']} | {ms('balanced_accuracy')} | "
+        f"{ms('balanced_accuracy_full_length')} | {ms('slip_recall')} | "
         f"{ms('wiggle_false_alarm')} | {r['first_alarm_frame_slip']['mean']:.0f} |"
     )
 
@@ -470,9 +498,10 @@ def main(argv: Sequence[str] | None = None) -> None:
     )
     args = ap.parse_args(argv)
     print(
-        "| detector | kind | balanced accuracy | slip recall | wiggle false alarms | first alarm (frame) |"
+        "| detector | kind | balanced accuracy | full-length clips | slip recall "
+        "| wiggle false alarms | first alarm (frame) |"
     )
-    print("|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|")
     data = load_dataset(args.dataset)
     res = (
         run_split(data, [Path(p) for p in args.split_of], args.only, arm=args.arm)
