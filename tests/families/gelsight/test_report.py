@@ -67,6 +67,12 @@ def test_the_clip_length_control_reads_what_a_streaming_detector_must_not() -> N
     assert np.isnan(r["balanced_accuracy_full_length"])
 
 
+def _score(factory, trials, y, g, seed: int = 0) -> dict:
+    return evaluate(
+        Candidate("c", (("", factory),)), trials, y, g, seed=seed, outer=3, inner=2
+    )
+
+
 def test_full_length_clips_are_scored_alone_where_clip_length_says_nothing() -> None:
     from slipkit.families.gelsight.report import full_length
 
@@ -78,28 +84,11 @@ def test_full_length_clips_are_scored_alone_where_clip_length_says_nothing() -> 
         trials[i] = _trial(rng, True, 60)
     full = full_length(trials)
     assert full.sum() == len(y) - (y == 1).sum() // 2
-    length = evaluate(
-        Candidate("len", (("", ClipLengthControl),)),
-        trials,
-        y,
-        g,
-        seed=0,
-        outer=3,
-        inner=2,
-    )
+    length = _score(ClipLengthControl, trials, y, g)
     assert length["balanced_accuracy"] == 0.75
     assert length["balanced_accuracy_full_length"] == 0.5
-    steady = evaluate(
-        Candidate(
-            "steady",
-            (("w25", lambda: PinMotionDetector(quantity="steady", window=25)),),
-        ),
-        trials,
-        y,
-        g,
-        seed=0,
-        outer=3,
-        inner=2,
+    steady = _score(
+        lambda: PinMotionDetector(quantity="steady", window=25), trials, y, g
     )
     assert steady["balanced_accuracy_full_length"] == 1.0
 
