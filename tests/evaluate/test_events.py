@@ -95,6 +95,23 @@ def test_unknown_onset_is_scored_on_detection_only() -> None:
     assert math.isnan(summary["early_alarm_rate"])
 
 
+def test_trial_balanced_accuracy_reads_trial_labels_only() -> None:
+    """Slip or wiggle, no onsets: 2 of 3 slips fire, 1 of 4 wiggles fires ->
+    (2/3 + 3/4) / 2; one kind of trial alone has none."""
+    slips = [
+        trial_events(TrialTruth(f"s{i}", T, True, math.nan), _scores(*a), 0.5, 1)
+        for i, a in enumerate([(3,), (8,), ()])
+    ]
+    wiggles = [
+        trial_events(TrialTruth(f"w{i}", T, False), _scores(*a), 0.5, 1)
+        for i, a in enumerate([(5,), (), (), ()])
+    ]
+    summary = summarise([*slips, *wiggles], Cost())
+    assert summary["trial_balanced_accuracy"] == pytest.approx((2 / 3 + 3 / 4) / 2)
+    assert math.isnan(summarise(slips, Cost())["trial_balanced_accuracy"])
+    assert math.isnan(summarise(wiggles, Cost())["trial_balanced_accuracy"])
+
+
 def test_a_trial_of_unknown_outcome_is_left_out() -> None:
     """slipped None: no outcome, NaN cost, not counted in event_trials."""
     ev = trial_events(TrialTruth("a", T, None, math.nan), _scores(3), 0.5, 1)

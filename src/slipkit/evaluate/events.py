@@ -439,11 +439,15 @@ def summarise(events: Sequence[TrialEvents], cost: Cost) -> dict[str, Any]:
     with an alarm; NaN without disturbances), ``delay_ms`` (median) and
     ``delay_p90_ms``, ``n_slips``, ``missed``, ``event_trials`` (trials of known
     outcome), ``unknown_onset_trials`` (slip trials scored on detection only),
-    ``disturbances``, ``cost`` (mean over trials of known outcome) and
+    ``disturbances``, ``cost`` (mean over trials of known outcome),
     ``cost_without_detector`` (what never alarming costs on the same trials: every slip
-    missed; a detector is worth deploying only below it).
+    missed; a detector is worth deploying only below it) and
+    ``trial_balanced_accuracy`` (the mean of the slips' detected rate and the share of
+    non-slip trials that never raised an early alarm: a trial-label score such as
+    slip-or-wiggle; NaN without both kinds of trial).
     """
     slips = [e for e in events if e.slipped is True]
+    quiet = [not e.early_alarm for e in events if e.slipped is False]
     detected = [e for e in slips if e.detected]
     early_defined = [e for e in events if e.early_alarm is not None]
     delays = np.asarray([e.delay_ms for e in detected if math.isfinite(e.delay_ms)])
@@ -474,6 +478,11 @@ def summarise(events: Sequence[TrialEvents], cost: Cost) -> dict[str, Any]:
         "cost": float(costs.mean()) if len(costs) else math.nan,
         "cost_without_detector": (
             cost.miss * len(slips) / len(costs) if len(costs) else math.nan
+        ),
+        "trial_balanced_accuracy": (
+            (len(detected) / len(slips) + sum(quiet) / len(quiet)) / 2
+            if slips and quiet
+            else math.nan
         ),
     }
 

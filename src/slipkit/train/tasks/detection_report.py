@@ -61,6 +61,9 @@ def operating_point_line(name: str, test: Mapping[str, Any], unit: str = "") -> 
     )
     unknown = int(op.get("unknown_onset_trials") or 0)
     note = f" ({unknown} slips of unknown onset: detection only)" if unknown else ""
+    ba = _float(op.get("trial_balanced_accuracy"))
+    if unknown and math.isfinite(ba):
+        note += f", balanced accuracy over trials {ba:.3f}"
     return (
         f"{name} at threshold {_num(op.get('threshold', test.get('threshold')))}"
         f"{' ' + unit if unit else ''}, debounce {int(op['debounce_k'])}: slips "
@@ -162,7 +165,8 @@ def _plot_roc(curves: Mapping[str, Mapping[str, Any]], path: Path) -> None:
     ax.set_xlabel("false positive rate")
     ax.set_ylabel("true positive rate")
     ax.set_title("ROC on the test trials")
-    ax.legend(fontsize=7, loc="lower right")
+    if ax.get_legend_handles_labels()[0]:  # no curve without slip samples (no onsets)
+        ax.legend(fontsize=7, loc="lower right")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
