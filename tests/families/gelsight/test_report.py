@@ -156,3 +156,31 @@ def test_one_split_scores_only_its_test_objects() -> None:
     short = [{"camera_0": t["camera_0"][:40]} for t in trials]
     r = _score_folds(always, short, y, g, [(tr, te)], seed=0, inner=2)
     assert r["balanced_accuracy"] == 0.5
+
+
+def test_a_runs_own_test_trials_are_read_as_the_deployed_row(tmp_path) -> None:
+    import pandas as pd
+    import pytest
+
+    from slipkit.errors import SlipkitError
+    from slipkit.families.gelsight.report import _run_trials
+
+    pd.DataFrame(
+        {
+            "trial_id": ["a/1", "b/1", "b/2", "c/1"],
+            "slipped": [True, True, False, False],
+            "n_alarms": [1, 0, 1, 0],
+            "first_alarm_s": [0.28, np.nan, 4.0, np.nan],
+        }
+    ).to_csv(tmp_path / "test_trials.csv", index=False)
+    index = {"x/1": 0, "a/1": 1, "b/1": 2, "b/2": 3, "c/1": 4}
+    y = np.array([0, 1, 1, 0, 0])
+    full = np.array([True, False, True, True, True])
+    r = _run_trials(tmp_path, index, y, full, 25.0)
+    assert (r["slip_recall"], r["wiggle_false_alarm"]) == (0.5, 0.5)
+    assert r["balanced_accuracy"] == 0.5
+    assert r["balanced_accuracy_full_length"] == 0.25  # b/1 missed, b/2 fired
+    assert r["first_alarm_frame_slip"] == 7
+    index.pop("c/1")
+    with pytest.raises(SlipkitError, match=r"test_trials\.csv: not the test trials"):
+        _run_trials(tmp_path, index, y, full, 25.0)

@@ -404,6 +404,8 @@ def run_split(
 
     trials, y, g, ids = load_trials(dataset)
     index = {t: i for i, t in enumerate(ids)}
+    full = full_length(trials)
+    rate = float(next(iter(dataset.streams.values())).rate_hz)
     rows: dict[str, Any] = {}
     per_run: list[dict[str, Any]] = []
     splits = []
@@ -421,16 +423,9 @@ def run_split(
             ) from None
         splits.append((seed, tr, te))
         op = m["test"]["operating_point"]
-        recall, early = float(op["detected_rate"]), float(op["early_alarm_rate"])
+        chosen = [f"{m['name']}: debounce {op['debounce_k']}"]
         per_run.append(
-            {
-                "balanced_accuracy": (recall + 1.0 - early) / 2,
-                "balanced_accuracy_full_length": math.nan,
-                "slip_recall": recall,
-                "wiggle_false_alarm": early,
-                "first_alarm_frame_slip": math.nan,
-                "chosen": [f"{m['name']}: debounce {op['debounce_k']}"],
-            }
+            {**_run_trials(Path(path), index, y, full, rate), "chosen": chosen}
         )
     groups = [("run", "deployed", per_run)]
     for cand in candidates(0, arm):
@@ -458,6 +453,28 @@ def run_split(
         }
         print(_row(name, rows[name]), flush=True)
     return {"runs": [str(p) for p in runs], "results": rows}
+
+
+def _run_trials(
+    run: Path, index: dict[str, int], y: np.ndarray, full: np.ndarray, rate: float
+) -> dict[str, float]:
+    """A run's own test trial events (``test_trials.csv``: the deployed detector's
+    alarms at its operating point) as :func:`pooled` rates over those trials."""
+    import pandas as pd
+
+    from slipkit.errors import SlipkitError
+
+    path = run / "test_trials.csv"
+    try:
+        t = pd.read_csv(path)
+        at = np.array([index[str(i)] for i in t["trial_id"]])
+        fired = t["n_alarms"].to_numpy() > 0
+        first = t["first_alarm_s"].to_numpy(np.float64) * rate
+    except (OSError, ValueError, KeyError) as exc:
+        raise SlipkitError(
+            f"{path}: not the test trials of this dataset ({exc})"
+        ) from None
+    return pooled(fired, np.round(first), y[at], full[at])
 
 
 def _row(name: str, r: dict[str, Any]) -> str:
