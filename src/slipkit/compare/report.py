@@ -268,11 +268,10 @@ def closest_line(df: pd.DataFrame, primary: str) -> str:
     if "p99_us" not in df or "budget_p99_us" not in df:
         return ""
     ok = df[df["export"].eq("ok")]
-    margin = ok["p99_us"].astype(float) / ok["budget_p99_us"].astype(float)
-    margin = margin[np.isfinite(margin.to_numpy(float))]
-    if margin.empty:
+    margin = (ok["p99_us"].astype(float) / ok["budget_p99_us"].astype(float)).to_numpy()
+    if not np.isfinite(margin).any():
         return ""
-    r = ok.loc[margin.idxmin()]
+    r = ok.iloc[int(np.nanargmin(np.where(np.isfinite(margin), margin, np.nan)))]
     judged = judge_p99(float(r["p99_us"]), float(r["budget_p99_us"]))
     if judged.passed:
         return ""
