@@ -39,3 +39,40 @@ def test_cost_step_times_prepare_frames_paced(prepared: Path) -> None:
         block_p99(cost.latency_us),
     ) == (len(cost.latency_us), cost.paced, cost.p99_us)
     assert np.isfinite(cost.p99_us)
+
+
+@pytest.mark.parametrize("diagnose", [True, False])
+def test_back_to_back_replay_only_when_paced_p99_fails(
+    prepared: Path, monkeypatch: pytest.MonkeyPatch, diagnose: bool
+) -> None:
+    """A paced p99 that is not within the budget is replayed once more back to back
+    (the same frames, decisions and prepare frames pooled); otherwise not. The budget
+    stays the manifest's per-frame one whatever the hop (10 here): the loop makes each
+    decision within its frame's step."""
+    import slipkit.compare.costs as costs
+
+    monkeypatch.setattr(costs, "needs_unpaced", lambda judged: diagnose)
+    frames, times = _stream()
+    n = 400
+    ref = StreamLoop(load_bundle(prepared)).run(ReplaySource(frames[:n], times[:n]))
+    cost = time_bundle(prepared, max_frames=n, warmup=2)
+    expect = len(ref.latency_ns) + len(ref.prepare_latency_ns) if diagnose else 0
+    assert (len(cost.unpaced_latency_us), cost.hop, cost.budget_p99_us) == (
+        expect,
+        10,
+        pytest.approx(100.0),
+    )
+    assert (
+        cost.p99_unpaced_us == block_p99(cost.unpaced_latency_us)
+        if diagnose
+        else np.isnan(cost.p99_unpaced_us)
+    )
+
+
+def test_needs_unpaced_follows_the_rule() -> None:
+    """Borderline and over call for the back-to-back replay; within and unmeasured not."""
+    from slipkit.compare.costs import needs_unpaced
+    from slipkit.runtime.budget import judge_p99
+
+    got = [needs_unpaced(judge_p99(p, 100.0)) for p in (50.0, 90.0, 300.0, np.nan)]
+    assert got == [False, True, True, False]

@@ -261,6 +261,7 @@ def _run_one(
         "within_budget": cost.within_budget,
         "export": cost.note,
         "p99_quiet_us": quiet_p99(cost.latency_us) if cost.exported else math.nan,
+        "p99_unpaced_us": cost.p99_unpaced_us,
     }
     return row, ev, cost, summary
 
@@ -470,6 +471,7 @@ def run_comparison(
     costs: dict[str, DeployCost] = {}
     summaries: dict[str, str] = {}
     pooled: dict[str, list[np.ndarray]] = {est: [] for est in estimators}
+    unpaced: dict[str, list[np.ndarray]] = {est: [] for est in estimators}
     runs_of: dict[str, Path] = {}
     bar = tqdm(
         total=len(seeds) * len(estimators),
@@ -497,6 +499,7 @@ def run_comparison(
                 runs_of[est] = sub / est
             if cost.exported:
                 pooled[est].append(np.asarray(cost.latency_us, dtype=np.float64))
+                unpaced[est].append(np.asarray(cost.unpaced_latency_us, np.float64))
             bar.update(1)
         if len(splits) != 1:
             raise SlipkitError(
@@ -516,7 +519,12 @@ def run_comparison(
         seeds_df.to_csv(folder / "seeds.csv", index=False)
         lat = {e: np.concatenate(v) for e, v in pooled.items() if v}
         lat = {e: v for e, v in lat.items() if len(v)}  # a bundle may reach no decision
-        df = seed_table(seeds_df, lat, primary)
+        df = seed_table(
+            seeds_df,
+            lat,
+            primary,
+            unpaced={e: np.concatenate(v) for e, v in unpaced.items() if v},
+        )
         for est, c in costs.items():
             if est in lat and c.exported:
                 # the latency plot shows what the verdict checked: all seeds' decisions

@@ -569,6 +569,7 @@ def seed_table(
     latencies: dict[str, np.ndarray],
     primary: str,
     confidence: float = 0.95,
+    unpaced: dict[str, np.ndarray] | None = None,
 ) -> pd.DataFrame:
     """The comparison table of several seeds: one row per estimator, means with their spread.
 
@@ -590,6 +591,10 @@ def seed_table(
         The comparison's primary metric.
     confidence : float
         Confidence level of the ``_ci`` columns.
+    unpaced : dict of str to ndarray, optional
+        The back-to-back replays' latencies (us) of the estimators that had one
+        (:attr:`slipkit.compare.costs.DeployCost.unpaced_latency_us`), all seeds
+        concatenated: ``p99_unpaced_us`` is their pooled p99 as well.
 
     Returns
     -------
@@ -637,6 +642,9 @@ def seed_table(
         else:
             row["p50_us"] = row["p99_us"] = row["p99_quiet_us"] = math.nan
             row["within_budget"] = None
+        if "p99_unpaced_us" in row:  # not a mean over seeds: the pooled p99, as p99_us
+            back = np.asarray((unpaced or {}).get(str(est), []), dtype=np.float64)
+            row["p99_unpaced_us"] = block_p99(back) if not bad else math.nan
         rows.append(row)
     return build_table(rows, primary)
 

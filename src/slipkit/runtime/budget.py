@@ -22,7 +22,9 @@ Margin
     ``margin = p99 / budget``: ``within`` up to :data:`BORDERLINE`, ``borderline`` up to
     ``1 / BORDERLINE`` (passes, flagged: a re-measure may land on the other side),
     ``over`` beyond (fails). The budget is already 10 % of the frame period, so the band
-    is far from a missed frame.
+    is far from a missed frame. It is per frame whatever the bundle's ``hop``: the loop
+    makes a decision within its frame's step, so the frames behind it (in a hand, every
+    stream's) wait for it; a call every ``hop`` frames gets no more time.
 
 Standard library and numpy only: it runs on the gripper PC.
 """
