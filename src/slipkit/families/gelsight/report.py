@@ -405,7 +405,8 @@ def run_split(
     trials, y, g, ids = load_trials(dataset)
     index = {t: i for i, t in enumerate(ids)}
     full = full_length(trials)
-    rate = float(next(iter(dataset.streams.values())).rate_hz)
+    hz = next(iter(dataset.streams.values())).rate_hz
+    rate = float(hz) if hz else math.nan  # no rate: no first-alarm frame
     rows: dict[str, Any] = {}
     per_run: list[dict[str, Any]] = []
     splits = []
