@@ -443,6 +443,7 @@ def demo_main(cfg: DictConfig) -> Path:
 
     # 4. export the verdict of each family ---------------------------------------------------
     from slipkit.compare.costs import export_run, time_bundle
+    from slipkit.compare.report import closest_line
     from slipkit.compare.table import choose_deploy, verdict_limits
 
     t_stage = time.perf_counter()
@@ -467,6 +468,8 @@ def demo_main(cfg: DictConfig) -> Path:
         if own:
             best[family]["why_not"] = own[-1]
         best[family]["primary"] = str(res.table.attrs.get("primary", ""))
+        if not choice.recommended:
+            best[family]["closest"] = closest_line(res.table, best[family]["primary"])
         if row["export"] != "ok":
             continue
         bundle = export_dir(out, family, recommended=choice.recommended)
@@ -760,6 +763,13 @@ def stage_text(stage_s: dict[str, float]) -> str:
     return "stage times (s): " + " | ".join(f"{k} {v:.1f}" for k, v in stage_s.items())
 
 
+def not_recommended_lines(best: dict[str, dict[str, Any]]) -> list[str]:
+    """Under the family table, one line per family that recommends nothing on latency:
+    its comparison report's row nearest the budget and what would make it fit."""
+    lines = [f"- {f}: {b['closest']}" for f, b in best.items() if b.get("closest")]
+    return ["", *lines] if lines else []
+
+
 def _write_index(
     out: Path,
     results: dict[str, Any],
@@ -778,6 +788,7 @@ def _write_index(
         f"{REPORT_TITLE}: which detector to deploy for each sensor",
         "",
         *family_table(results, best, closed),
+        *not_recommended_lines(best),
         "",
         f"Verdict: the highest mean score over {n} seed{'s' if n > 1 else ''} "
         f"({', '.join(map(str, seeds))}) among the estimators whose bundle exports and "

@@ -341,3 +341,23 @@ def test_a_rerun_clears_the_familys_bundle_under_the_other_verdict(
     assert clear_family_bundles(out, "davis") == []
     assert (mine / "notes.txt").is_file()
     assert (other / "manifest.json").is_file()
+
+
+def test_a_family_with_no_recommendation_names_its_closest_row_under_the_table() -> (
+    None
+):
+    from slipkit.demo import not_recommended_lines
+
+    best = {
+        "fsr": {"estimator": "fsr_onset", "recommended": True},
+        "sliptack": {
+            "estimator": "calibrated",
+            "recommended": False,
+            "closest": "Closest to the budget: `calibrated` (rmse 17), over (2.4x)",
+        },
+    }
+    assert not_recommended_lines(best) == [
+        "",
+        "- sliptack: Closest to the budget: `calibrated` (rmse 17), over (2.4x)",
+    ]
+    assert not_recommended_lines({"fsr": best["fsr"]}) == []
