@@ -132,16 +132,7 @@ def fd_only(est: Any) -> ExportedGraph:
         [helper.make_tensor_value_info("score", FLOAT, ["batch"])],
         doc="f_d only",
     )
-    return ExportedGraph(
-        model=model,
-        input_name="window",
-        input_shape=("batch", w, 1),
-        output_names=("score",),
-        score_output="score",
-        score_meaning="f_d (Hz)",
-        score_method="predict",
-        opset=17,
-    )
+    return _window_graph(model, w, "f_d (Hz)")
 
 
 def empty_graph(window: int) -> ExportedGraph:
@@ -158,13 +149,18 @@ def empty_graph(window: int) -> ExportedGraph:
         ),
         opset_imports=[helper.make_opsetid("", 17)],
     )
+    return _window_graph(model, window, "mean")
+
+
+def _window_graph(model: Any, window: int, meaning: str) -> ExportedGraph:
+    """A graph of one ``window`` input and one ``score`` output, as the bench times it."""
     return ExportedGraph(
         model=model,
         input_name="window",
         input_shape=("batch", window, 1),
         output_names=("score",),
         score_output="score",
-        score_meaning="mean",
+        score_meaning=meaning,
         score_method="predict",
         opset=17,
     )
