@@ -312,3 +312,39 @@ def test_evaluate_prints_the_operating_point_first_and_writes_it(
         point["debounce_k"],
         point["event_trials"],
     )
+
+
+def test_summary_without_onsets_points_to_the_operating_points_trial_events() -> None:
+    """Slip-or-wiggle labels (no onset): the threshold-level trial line has no slip to
+    count, so it says where the slips are scored instead of printing 0/0."""
+    from slipkit.train.tasks.detection_report import _summary_block
+
+    rates = {"tpr": math.nan, "tnr": 0.99, "fpr": 0.01, "fnr": math.nan}
+    block = {
+        "estimator": "PinContactDetector",
+        "stream": "camera_0",
+        "threshold_from": "validation",
+        "test": {
+            "threshold": 0.19,
+            "samples": {"auc": math.nan, **rates},
+            "events": {
+                "auc": math.nan,
+                "sensitivity": math.nan,
+                "specificity": 0.99,
+                "tp": 0,
+                "n_events": 0,
+                "fp": 3,
+                "n_negative_windows": 300,
+            },
+            "trials": {"n": 41, "n_slip": 0, "tp": 0, "fp": 11},
+            "latency_ms": {"mean": math.nan, "sd": math.nan},
+            "operating_point": {"unknown_onset_trials": 12},
+        },
+    }
+    lines = _summary_block("gelsight_contact", block, None)
+    assert lines[-1] == (
+        "  test trials: no slip onsets (12 slip trials scored on detection only, at "
+        "the operating point above)"
+    )
+    block["test"]["operating_point"] = {"unknown_onset_trials": 0}
+    assert _summary_block("x", block, None)[-1].startswith("  test trials: 0/0 slips")

@@ -107,6 +107,14 @@ def _summary_block(name: str, b: Mapping[str, Any], group_by: str | None) -> lis
         f"fired before the onset; latency from onset {_num(te['latency_ms']['mean'], '.1f')}"
         f" +- {_num(te['latency_ms']['sd'], '.1f')} ms",
     ]
+    unknown = int((te.get("operating_point") or {}).get("unknown_onset_trials") or 0)
+    if unknown and not tr["n_slip"]:
+        # no onsets: the line above has no slip to count; the trial events are the
+        # operating point's (printed first), where a slip is detected by any alarm
+        lines[-1] = (
+            f"  test trials: no slip onsets ({unknown} slip trials scored on detection "
+            "only, at the operating point above)"
+        )
     if "disturbances" in te:
         d = te["disturbances"]
         lines.append(
