@@ -26,15 +26,15 @@ Outcome columns (:class:`~slipkit.closedloop.run.Outcome`):
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from functools import partial
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
 from slipkit.closedloop.detectors import Detector
-from slipkit.closedloop.plant import Actuator, PinchPlant, PlantState
+from slipkit.closedloop.plant import G_M_S2, Actuator, PinchPlant, PlantState
 from slipkit.closedloop.run import Outcome
 
 
@@ -172,6 +172,56 @@ def run_pinch_trial(
         extra_force_N=float(peak) if false_alarm else 0.0,
         extra_impulse_Ns=float(impulse) if false_alarm else 0.0,
         frames=frames,
+    )
+
+
+def pinch_trial(
+    plant: Mapping[str, Any],
+    *,
+    mass_kg: float,
+    mu_s: float,
+    mu_k: float,
+    contacts: int,
+    lift_s: tuple[float, float],
+    rise_s: tuple[float, float],
+    load_factor: float,
+    rate_hz: float,
+    sensor: FrameSensor,
+    controller: Callable[[], GripController],
+    t_end: float,
+) -> PinchTrial:
+    """The pinch trial of a scenario's plant parameters (``latency_s``, ``tau_s``,
+    ``max_force_N``, ``travel_mm``, ``substeps``): an object of ``mass_kg`` between
+    ``contacts`` pads, lifted over ``lift_s`` (its weight taken up), then loaded to
+    ``load_factor`` x its weight over ``rise_s`` (:func:`load_profile`); the controller
+    and its shadow are two calls of ``controller``, each with its own actuator of the
+    plant's latency and lag."""
+    weight = mass_kg * G_M_S2
+    latency, tau = float(plant["latency_s"]), float(plant["tau_s"])
+    pinch = PinchPlant(
+        mass_kg=mass_kg,
+        mu_s=mu_s,
+        mu_k=mu_k,
+        contacts=contacts,
+        load=load_profile(
+            weight_N=weight,
+            lift_s=lift_s,
+            rise_s=rise_s,
+            final_N=load_factor * weight,
+        ),
+        actuator=Actuator(latency, tau),
+        max_force_N=float(plant["max_force_N"]),
+        travel_mm=float(plant["travel_mm"]),
+        rate_hz=rate_hz,
+        substeps=int(plant.get("substeps", 1)),
+    )
+    return PinchTrial(
+        plant=pinch,
+        sensor=sensor,
+        controller=controller(),
+        shadow=controller(),
+        shadow_actuator=Actuator(latency, tau),
+        t_end=t_end,
     )
 
 

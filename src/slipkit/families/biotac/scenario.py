@@ -39,17 +39,14 @@ import numpy as np
 
 from slipkit._options import within
 from slipkit.closedloop.detectors import Detector
-from slipkit.closedloop.pinch import PinchTrial, load_profile, run_pinch_trial
+from slipkit.closedloop.pinch import pinch_trial, run_pinch_trial
 from slipkit.closedloop.plant import (
     FORCE_N,
-    G_M_S2,
     LAG_S,
     LATENCY_S,
     PHASE_S,
     SUBSTEPS,
     TRAVEL_MM,
-    Actuator,
-    PinchPlant,
     PlantState,
     check_params,
 )
@@ -323,7 +320,6 @@ class BioTacScenario(GridScenario):
         prior = _draw(rng, plant["mu_prior"])
         margin = _draw(rng, plant["margin"])
         factor = _draw(rng, plant["load_factor"])
-        weight = mass * G_M_S2
         close = float(plant["approach_s"])
         lift0 = close + float(plant["press_s"])
         lift1 = lift0 + float(plant["lift_s"])
@@ -344,31 +340,19 @@ class BioTacScenario(GridScenario):
                 control_hz=float(plant["control_hz"]),
             )
 
-        latency, tau = float(plant["latency_s"]), float(plant["tau_s"])
-        pinch = PinchPlant(
-            mass_kg=mass,
-            mu_s=mu_s,
-            mu_k=mu_k,
-            contacts=contacts,
-            load=load_profile(
-                weight_N=weight,
+        return run_pinch_trial(
+            pinch_trial(
+                plant,
+                mass_kg=mass,
+                mu_s=mu_s,
+                mu_k=mu_k,
+                contacts=contacts,
                 lift_s=(lift0, lift1),
                 rise_s=(change0, change1),
-                final_N=factor * weight,
-            ),
-            actuator=Actuator(latency, tau),
-            max_force_N=float(plant["max_force_N"]),
-            travel_mm=float(plant["travel_mm"]),
-            rate_hz=rate,
-            substeps=int(plant.get("substeps", 1)),
-        )
-        return run_pinch_trial(
-            PinchTrial(
-                plant=pinch,
+                load_factor=factor,
+                rate_hz=rate,
                 sensor=sensor,
-                controller=controller(),
-                shadow=controller(),
-                shadow_actuator=Actuator(latency, tau),
+                controller=controller,
                 t_end=t_end,
             ),
             detector,
