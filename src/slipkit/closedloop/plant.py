@@ -224,7 +224,38 @@ class PlantState:
     normal_rate_N_s: float = math.nan
 
 
-class GraspPlant:
+class SteppedPlant:
+    """What every plant shares: a frame (``1 / rate_hz`` s) advanced in ``substeps``
+    steps of :meth:`_substep` (a subclass's dynamics) until the object drops, and the
+    re-stick that ends a slide (:meth:`_stick`: the first arrest after the onset is
+    kept)."""
+
+    state: PlantState
+    rate_hz: float
+    substeps: int
+
+    def _substep(self, h: float) -> None:
+        raise NotImplementedError
+
+    def _stick(self, t: float) -> None:
+        s = self.state
+        s.sliding = False
+        s.speed_mm_s = 0.0
+        if not math.isnan(s.onset_s) and math.isnan(s.arrest_s):
+            s.arrest_s = t
+
+    def step(self) -> PlantState:
+        """Advance one frame (``1 / rate_hz`` s, in ``substeps`` steps); the new state."""
+        h = 1.0 / self.rate_hz / self.substeps
+        for _ in range(self.substeps):
+            if self.state.dropped:
+                self.state.t += h
+                continue
+            self._substep(h)
+        return self.state
+
+
+class GraspPlant(SteppedPlant):
     """A fingertip pressing an object that friction holds against a tangential load.
 
     Parameters
@@ -360,25 +391,8 @@ class GraspPlant:
                 s.dropped = True
         s.t = t_next
 
-    def _stick(self, t: float) -> None:
-        s = self.state
-        s.sliding = False
-        s.speed_mm_s = 0.0
-        if not math.isnan(s.onset_s) and math.isnan(s.arrest_s):
-            s.arrest_s = t
 
-    def step(self) -> PlantState:
-        """Advance one frame (``1 / rate_hz`` s, in ``substeps`` steps); the new state."""
-        h = 1.0 / self.rate_hz / self.substeps
-        for _ in range(self.substeps):
-            if self.state.dropped:
-                self.state.t += h
-                continue
-            self._substep(h)
-        return self.state
-
-
-class PinchPlant:
+class PinchPlant(SteppedPlant):
     """An object pinched by a force-controlled hand under a tangential load that changes in time.
 
     A prosthetic or robot hand holds the object between ``contacts`` fingertips with grip
@@ -492,16 +506,12 @@ class PinchPlant:
         s.t = t_next
 
     def step(self) -> PlantState:
-        """Advance one frame (``1 / rate_hz`` s, in ``substeps`` steps); the new state."""
-        h = 1.0 / self.rate_hz / self.substeps
+        """Advance one frame (:meth:`SteppedPlant.step`); the new state, with the grip's
+        rate of change over the frame."""
         before = self.state.normal_N
-        for _ in range(self.substeps):
-            if self.state.dropped:
-                self.state.t += h
-                continue
-            self._substep(h)
-        self.state.normal_rate_N_s = (self.state.normal_N - before) * self.rate_hz
-        return self.state
+        state = super().step()
+        state.normal_rate_N_s = (state.normal_N - before) * self.rate_hz
+        return state
 
 
 def slip_distance_driven(

@@ -53,6 +53,7 @@ from slipkit.closedloop.plant import (
     SUBSTEPS,
     TRAVEL_MM,
     PlantState,
+    SteppedPlant,
     check_grid,
     check_params,
     span,
@@ -287,7 +288,7 @@ class SlipTackSensor:
         return np.asarray(one.signals["nib"], dtype=np.float64)
 
 
-class SlipTackPlant:
+class SlipTackPlant(SteppedPlant):
     """A parallel-jaw grip on an object loaded along the contact (module docstring).
 
     Parameters
@@ -448,23 +449,6 @@ class SlipTackPlant:
             if s.drop_mm > self.travel_mm:
                 s.dropped = True
         s.t = t_next
-
-    def _stick(self, t: float) -> None:
-        s = self.state
-        s.sliding = False
-        s.speed_mm_s = 0.0
-        if not math.isnan(s.onset_s) and math.isnan(s.arrest_s):
-            s.arrest_s = t
-
-    def step(self) -> PlantState:
-        """Advance one frame (``1 / rate_hz`` s in ``substeps`` steps); the new state."""
-        h = 1.0 / self.rate_hz / self.substeps
-        for _ in range(self.substeps):
-            if self.state.dropped:
-                self.state.t += h
-                continue
-            self._substep(h)
-        return self.state
 
 
 #: Declared ranges of the SlipTack plant's parameters (configs/closedloop/sliptack.yaml says the same).
