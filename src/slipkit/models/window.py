@@ -217,6 +217,19 @@ class _WindowNet(ClassifierMixin, BaseEstimator):
     ) -> tuple[type[nn.Module], dict[str, Any]]:
         """The module class and its keyword arguments for this input and class count."""
 
+    def _frames(self, n_features: int) -> int:
+        """Frames per window of a temporal model (``n_channels`` values each), set as
+        ``width_``; an input that is not whole frames is refused naming the fix."""
+        n_channels = int(getattr(self, "n_channels", 1))
+        if n_features % n_channels:
+            raise ValueError(
+                f"{type(self).__name__}: {n_features} inputs per window is not a "
+                f"multiple of n_channels={n_channels}; set n_channels to the "
+                "stream's channel count"
+            )
+        self.width_ = n_features // n_channels
+        return self.width_
+
     def _seed(self) -> int:
         # An int seed keeps fits repeatable; None draws one (scikit-learn's meaning).
         rs = self.random_state
@@ -564,17 +577,11 @@ class WindowCNN(_WindowNet):
     def _module(
         self, n_features: int, n_classes: int
     ) -> tuple[type[nn.Module], dict[str, Any]]:
-        if n_features % self.n_channels:
-            raise ValueError(
-                f"{type(self).__name__}: {n_features} inputs per window is not a "
-                f"multiple of n_channels={self.n_channels}; set n_channels to the "
-                "stream's channel count"
-            )
+        self._frames(n_features)
         if self.kernel_size % 2 == 0:
             raise ValueError(
                 f"kernel_size must be odd (same-length padding); got {self.kernel_size}"
             )
-        self.width_ = n_features // self.n_channels
         return TemporalCNNModule, {
             "n_channels": self.n_channels,
             "width": self.width_,
@@ -651,13 +658,7 @@ class WindowGRU(_WindowNet):
     def _module(
         self, n_features: int, n_classes: int
     ) -> tuple[type[nn.Module], dict[str, Any]]:
-        if n_features % self.n_channels:
-            raise ValueError(
-                f"{type(self).__name__}: {n_features} inputs per window is not a "
-                f"multiple of n_channels={self.n_channels}; set n_channels to the "
-                "stream's channel count"
-            )
-        self.width_ = n_features // self.n_channels
+        self._frames(n_features)
         return GRUModule, {
             "n_channels": self.n_channels,
             "width": self.width_,
