@@ -295,12 +295,17 @@ def clear_family_bundles(out: Path, family: str) -> list[Path]:
     """Remove the bundles an earlier demo into ``out`` left for ``family``, in
     ``exports/<family>`` and ``exports/not_recommended/<family>`` (with their
     ``.export.log``), so a family whose recommendation changed between runs keeps no
-    bundle under the other verdict. Only slipkit bundles are removed; anything else
-    at those paths is left for the export to refuse. Returns the removed folders."""
+    bundle under the other verdict. Only slipkit bundles inside ``out`` are removed
+    (never through a symbolic link); anything else at those paths is left for the
+    export to refuse. Returns the removed folders."""
     removed = []
+    root = out.resolve()
     for recommended in (True, False):
         where = export_dir(out, family, recommended=recommended)
-        if manifest_kind(where) == "bundle":
+        # a symbolic link on the way (the bundle or a folder above it) could lead out
+        # of the demo's folder: left for the export to refuse
+        inside = not where.is_symlink() and root in where.resolve().parents
+        if inside and manifest_kind(where) == "bundle":
             shutil.rmtree(where)
             where.with_name(f"{where.name}.export.log").unlink(missing_ok=True)
             removed.append(where)

@@ -361,3 +361,17 @@ def test_a_family_with_no_recommendation_names_its_closest_row_under_the_table()
         "- sliptack: Closest to the budget: `calibrated` (rmse 17), over (2.4x)",
     ]
     assert not_recommended_lines({"fsr": best["fsr"]}) == []
+
+
+def test_clearing_never_follows_a_link_out_of_the_demo_folder(tmp_path: Path) -> None:
+    from slipkit._files import BUNDLE_FORMAT
+    from slipkit.demo import clear_family_bundles
+
+    elsewhere = tmp_path / "lab" / "fsr"
+    elsewhere.mkdir(parents=True)
+    (elsewhere / "manifest.json").write_text(json.dumps({"format": BUNDLE_FORMAT}))
+    out = tmp_path / "demo"
+    out.mkdir()
+    (out / "exports").symlink_to(tmp_path / "lab", target_is_directory=True)
+    assert clear_family_bundles(out, "fsr") == []
+    assert (elsewhere / "manifest.json").is_file()

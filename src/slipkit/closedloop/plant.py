@@ -27,6 +27,7 @@ integration against the closed forms (:func:`slip_distance_driven`).
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -224,7 +225,7 @@ class PlantState:
     normal_rate_N_s: float = math.nan
 
 
-class SteppedPlant:
+class SteppedPlant(ABC):
     """What every plant shares: a frame (``1 / rate_hz`` s) advanced in ``substeps``
     steps of :meth:`_substep` (a subclass's dynamics) until the object drops, and the
     re-stick that ends a slide (:meth:`_stick`: the first arrest after the onset is
@@ -234,8 +235,9 @@ class SteppedPlant:
     rate_hz: float
     substeps: int
 
+    @abstractmethod
     def _substep(self, h: float) -> None:
-        raise NotImplementedError
+        """Advance the plant's dynamics by ``h`` s."""
 
     def _stick(self, t: float) -> None:
         s = self.state

@@ -184,3 +184,27 @@ def test_a_runs_own_test_trials_are_read_as_the_deployed_row(tmp_path) -> None:
     index.pop("c/1")
     with pytest.raises(SlipkitError, match=r"test_trials\.csv: not the test trials"):
         _run_trials(tmp_path, index, y, full, 25.0)
+
+
+def test_out_replaces_only_earlier_results_and_never_an_input(tmp_path) -> None:
+    import json
+
+    import pytest
+
+    from slipkit.errors import SlipkitError
+    from slipkit.families.gelsight.report import check_json_out, write_json_out
+
+    data = tmp_path / "data.json"
+    data.write_text("{}")
+    inputs = {"dataset": str(data)}
+    assert check_json_out(None, inputs) is None
+    out = check_json_out(str(tmp_path / "r.json"), inputs)
+    assert out is not None
+    write_json_out(out, {"results": {"majority": {}}}, inputs)
+    assert check_json_out(str(out), inputs) == out  # earlier results: replaced
+    notes = tmp_path / "notes.json"
+    notes.write_text(json.dumps({"mine": 1}))
+    with pytest.raises(SlipkitError, match="not GelSight results"):
+        check_json_out(str(notes), inputs)
+    with pytest.raises(SlipkitError, match="--out"):
+        check_json_out(str(data), inputs)

@@ -478,6 +478,44 @@ def _run_trials(
     return pooled(fired, np.round(first), y[at], full[at])
 
 
+def _is_results(path: Path) -> bool:
+    """Whether ``path`` holds results this module wrote (a JSON object with
+    ``results``): what ``--out`` may replace."""
+    from slipkit._files import read_json_object
+
+    obj = read_json_object(path)
+    return obj is not None and "results" in obj
+
+
+def check_json_out(out: str | None, inputs: dict[str, str | None]) -> Path | None:
+    """``--out`` checked before any work by the out-file rule
+    (:func:`slipkit._files.check_out_file`): not an input, not inside a dataset, run or
+    bundle, and an existing file only when it holds earlier results."""
+    from slipkit._files import check_out_file
+
+    if not out:
+        return None
+    return check_out_file(
+        out, option="--out", inputs=inputs, is_own=_is_results, what="GelSight results"
+    )
+
+
+def write_json_out(
+    path: Path, res: dict[str, Any], inputs: dict[str, str | None]
+) -> None:
+    """Write ``res`` to ``--out`` (checked again, then written atomically)."""
+    from slipkit._files import write_out_file
+
+    write_out_file(
+        path,
+        json.dumps(res, indent=2),
+        option="--out",
+        inputs=inputs,
+        is_own=_is_results,
+        what="GelSight results",
+    )
+
+
 def _row(name: str, r: dict[str, Any]) -> str:
     def ms(k: str, d: int = 2) -> str:
         if not math.isfinite(r[k]["mean"]):
@@ -520,17 +558,16 @@ def main(argv: Sequence[str] | None = None) -> None:
         "| wiggle false alarms | first alarm (frame) |"
     )
     print("|---|---|---|---|---|---|---|")
+    inputs: dict[str, str | None] = {"dataset": args.dataset}
+    out = check_json_out(args.out, inputs)
     data = load_dataset(args.dataset)
     res = (
         run_split(data, [Path(p) for p in args.split_of], args.only, arm=args.arm)
         if args.split_of
         else run(data, args.seeds, args.only, arm=args.arm)
     )
-    if args.out:
-        out = Path(args.out)
-        tmp = out.with_suffix(out.suffix + ".tmp")
-        tmp.write_text(json.dumps(res, indent=2))
-        tmp.replace(out)
+    if out is not None:
+        write_json_out(out, res, inputs)
 
 
 if __name__ == "__main__":  # pragma: no cover

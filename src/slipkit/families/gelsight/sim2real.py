@@ -31,10 +31,12 @@ from slipkit.errors import SlipkitError
 from slipkit.families.gelsight.detectors import Trial
 from slipkit.families.gelsight.report import (
     candidates,
+    check_json_out,
     choose_setting,
     evaluate,
     load_trials,
     pooled,
+    write_json_out,
 )
 
 KEYS = ("balanced_accuracy", "slip_recall", "wiggle_false_alarm")
@@ -198,6 +200,12 @@ def main(argv: Sequence[str] | None = None) -> None:
         help="leave the trained-on-real column out (the report gives it)",
     )
     args = ap.parse_args(argv)
+    inputs: dict[str, str | None] = {
+        "--real": args.real,
+        "--real-report": args.real_report,
+        **{f"--sim {p}": p for p in args.sim},
+    }
+    out = check_json_out(args.out, inputs)
     real = load_dataset(args.real)
     sims = [load_dataset(p) for p in args.sim]
     print(HEADER)
@@ -218,11 +226,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         real_report=reported,
         skip_real=args.skip_real,
     )
-    if args.out:
-        out = Path(args.out)
-        tmp = out.with_suffix(out.suffix + ".tmp")
-        tmp.write_text(json.dumps(res, indent=2))
-        tmp.replace(out)
+    if out is not None:
+        write_json_out(out, res, inputs)
 
 
 if __name__ == "__main__":  # pragma: no cover
