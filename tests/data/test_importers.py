@@ -296,6 +296,35 @@ def test_bts3v2_ragged_row_names_file(tmp_path: Path) -> None:
         read_bts3v2(root)
 
 
+def test_bts3v2_published_test_files_beside_the_training_files(tmp_path: Path) -> None:
+    """The published ``_test`` files read with the training files, each grasp marked
+    with its set; ids stay unique and the training ids unchanged."""
+    root = make_bts3v2(tmp_path / "bts")
+    write_csv(
+        root / "bts3v2_palm_down_test.csv", BTS_HEADER, bts_rows(["cup", "box"], [1, 0])
+    )
+    write_csv(root / "bts3v2_palm_45_test.csv", BTS_HEADER, bts_rows(["cup"], [1]))
+    ds = read_bts3v2(root)
+    assert 9 == len(ds)
+    assert ["palm_down/0000", "palm_down/0001"] == ds.trial_ids[:2]
+    assert ["palm_down_test/0000", "palm_down_test/0001", "palm_45_test/0000"] == (
+        ds.trial_ids[6:]
+    )
+    sets = ds.trials.set_index("trial_id")["published_split"]
+    assert ["train"] * 6 + ["test"] * 3 == sets.tolist()
+    assert "palm_45" == ds["palm_45_test/0000"].meta["orientation"]
+    alone = read_bts3v2(root / "bts3v2_palm_down_test.csv")
+    assert {"test"} == set(alone.trials["published_split"])
+
+
+def test_bts3v2_two_files_of_one_orientation_and_set(tmp_path: Path) -> None:
+    """Two files of one orientation in the same set are refused, naming both."""
+    root = make_bts3v2(tmp_path / "bts")
+    write_csv(root / "old_palm_45.csv", BTS_HEADER, bts_rows(["a"], [0]))
+    with pytest.raises(SourceFormatError, match=r"palm_45\.csv: orientation 'palm_45'"):
+        read_bts3v2(root)
+
+
 def test_bts3v2_file_without_orientation(tmp_path: Path) -> None:
     """A CSV whose name carries no orientation is rejected naming the file."""
     root = make_bts3v2(tmp_path / "bts")

@@ -26,11 +26,14 @@ from slipkit.train.commands import evaluate_main, train_main
 BASELINE = {"palm_down": 2800.0, "palm_side": 2950.0, "palm_45": 3150.0}
 
 
-def write_synthetic_bts3v2(folder: Path, n_objects: int = 12, seed: int = 0) -> Path:
+def write_synthetic_bts3v2(
+    folder: Path, n_objects: int = 12, seed: int = 0, *, test: bool = False
+) -> Path:
     """BTS3v2 layout: slipped when electrodes 0-5 of the thumb read low, plus an
-    orientation-dependent baseline."""
+    orientation-dependent baseline (``test``: the published test files, of objects
+    ``new0..``)."""
     rng = np.random.default_rng(seed)
-    folder.mkdir()
+    folder.mkdir(exist_ok=True)
     for orientation in ORIENTATIONS:
         rows = []
         for k in range(n_objects):
@@ -38,9 +41,9 @@ def write_synthetic_bts3v2(folder: Path, n_objects: int = 12, seed: int = 0) -> 
                 e = BASELINE[orientation] + rng.normal(0.0, 30.0, 72)
                 slipped = int(rng.random() < 0.5)
                 e[48:54] -= 0.0 if slipped else 150.0
-                rows.append([f"obj{k}", slipped, *e.round(0)])
+                rows.append([f"{'new' if test else 'obj'}{k}", slipped, *e.round(0)])
         pd.DataFrame(rows, columns=["object", "slipped", *CHANNELS]).to_csv(
-            folder / f"bts3v2_{orientation}.csv", index=False
+            folder / f"bts3v2_{orientation}{'_test' if test else ''}.csv", index=False
         )
     return folder
 
@@ -247,6 +250,61 @@ def test_grasp_task_names_a_missing_column(synthetic: Dataset, tmp_path: Path) -
         )
 
 
+def test_published_test_files_are_the_test_set_and_never_train(
+    tmp_path: Path,
+) -> None:
+    """With the published test files imported, they are the test set (auto); with
+    split=objects they are left out; published without them, or an object in both
+    sets, is refused."""
+    raw = write_synthetic_bts3v2(tmp_path / "bts", n_objects=6)
+    write_synthetic_bts3v2(raw, n_objects=3, seed=1, test=True)
+    both = read_bts3v2(raw)
+    m = _task(cv=2).fit(LogisticRegression(), both, seed=0, out=tmp_path).metrics
+    sp = m["split"]
+    assert "published test files" == sp["test_set"]
+    assert ["new0", "new1", "new2"] == sp["test_objects"]
+    assert (180, 90) == (sp["n_train"], sp["n_test"])
+    # the test files' labels change the test scores only, never the selection
+    test_ids = both.trials.loc[both.trials["published_split"] == "test", "trial_id"]
+    bad = (
+        _task(cv=2)
+        .fit(
+            LogisticRegression(),
+            _relabel(both, test_ids.tolist()),
+            seed=0,
+            out=tmp_path,
+        )
+        .metrics
+    )
+    assert m["selection"] == bad["selection"]
+    assert m["test"]["accuracy"] != bad["test"]["accuracy"]
+    alone = read_bts3v2(raw / "bts3v2_palm_down.csv")
+    m_obj = (
+        _task(cv=2, split="objects")
+        .fit(LogisticRegression(), both, seed=0, out=tmp_path)
+        .metrics["split"]
+    )
+    assert "held-out objects" == m_obj["test_set"]
+    assert not {"new0", "new1", "new2"} & set(
+        m_obj["train_objects"] + m_obj["test_objects"]
+    )
+    with pytest.raises(SlipkitError, match=r"task\.split=published: no trial"):
+        _task(split="published").fit(LogisticRegression(), alone, seed=0, out=tmp_path)
+    trials = both.trials.copy()
+    trials.loc[trials["trial_id"] == "palm_45_test/0000", "object"] = "obj0"
+    mixed = Dataset(
+        sensor=both.sensor,
+        streams=both.streams,
+        trials=trials,
+        tables=both.tables,
+        labels=both.labels,
+        groups=both.groups,
+        name="mixed",
+    )
+    with pytest.raises(SlipkitError, match=r"objects \['obj0'\] are in both"):
+        _task().fit(LogisticRegression(), mixed, seed=0, out=tmp_path)
+
+
 def test_train_bts3v2_stability_end_to_end_on_a_synthetic_recording(
     tmp_path: Path,
 ) -> None:
@@ -292,6 +350,17 @@ def test_train_bts3v2_stability_end_to_end_on_a_synthetic_recording(
         min(m["balanced_accuracy"] for m in scores["per_orientation"].values())
         == scores["worst_orientation_balanced_accuracy"]
     )
+    # beside its training files, only the published test files are scored
+    write_synthetic_bts3v2(other, n_objects=2, seed=6, test=True)
+    both = save_dataset(read_bts3v2(other), tmp_path / "both")
+    with initialize_config_dir(
+        config_dir=str(slipkit.config_dir()), version_base="1.3"
+    ):
+        ecfg = compose(
+            config_name="evaluate",
+            overrides=[f"run={run}", f"dataset={both}", "name=both"],
+        )
+    assert 60 == json.loads(evaluate_main(ecfg).read_text())["test"]["n"]
 
 
 @pytest.mark.realdata

@@ -2,7 +2,11 @@
 
 Source layout (github.com/3dperceptionlab/biotacsp-stability-set-v2)::
 
-    bts3v2/bts3v2_palm_down.csv   bts3v2_palm_side.csv   bts3v2_palm_45.csv
+    bts3v2/bts3v2_palm_down.csv       bts3v2_palm_side.csv       bts3v2_palm_45.csv
+           bts3v2_palm_down_test.csv  bts3v2_palm_side_test.csv  bts3v2_palm_45_test.csv
+
+The first three files are the published training set (41 objects), the ``_test`` ones
+the published test set (10 further objects); either set, or both, may be present.
 
 Each row is one grasp: ``object``, ``slipped`` (0 stable, 1 slipped on lifting),
 then 72 electrode values (``ff_biotac_1..24``, ``mf_biotac_1..24``,
@@ -27,7 +31,7 @@ from slipkit.data.importers.csv import (
 )
 from slipkit.errors import SourceFormatError
 
-__all__ = ["CHANNELS", "CLASSES", "ORIENTATIONS", "read_bts3v2"]
+__all__ = ["CHANNELS", "CLASSES", "ORIENTATIONS", "SPLITS", "read_bts3v2"]
 
 #: Fingers carrying a BioTac SP: first, middle, thumb.
 FINGERS: tuple[str, ...] = ("ff", "mf", "th")
@@ -38,6 +42,9 @@ CHANNELS: tuple[str, ...] = tuple(
 HEADER: tuple[str, ...] = ("object", "slipped", *CHANNELS)
 #: Hand orientations, one file each.
 ORIENTATIONS: tuple[str, ...] = ("palm_down", "palm_side", "palm_45")
+#: Values of the trials column ``published_split``: from a training file, from a
+#: ``_test`` file.
+SPLITS: tuple[str, ...] = ("train", "test")
 #: Classes of ``slip_class``: column ``slipped`` 0 and 1.
 CLASSES: tuple[str, ...] = ("stable", "slipped")
 
@@ -48,41 +55,49 @@ CITATION = (
 )
 LICENSE = "MIT (LICENSE file of the source repository)"
 
-_ORIENTATION = re.compile(r"(?:^|_)(palm_(?:down|side|45))$")
+_FILE_NAME = re.compile(r"(?:^|_)(palm_(?:down|side|45))(_test)?$")
 
 
-def _orientation(file: Path) -> str:
-    match = _ORIENTATION.search(file.stem)
+def _orientation(file: Path) -> tuple[str, str]:
+    """(orientation, published split) from a file name."""
+    match = _FILE_NAME.search(file.stem)
     if match is None:
         raise SourceFormatError(
             f"{file}: file name does not end in an orientation; expected "
-            f"bts3v2_<orientation>.csv with <orientation> in {list(ORIENTATIONS)}"
+            f"bts3v2_<orientation>.csv or bts3v2_<orientation>_test.csv with "
+            f"<orientation> in {list(ORIENTATIONS)}"
         )
-    return match.group(1)
+    return match.group(1), SPLITS[1] if match.group(2) else SPLITS[0]
 
 
-def _list_files(path: Path) -> list[tuple[str, Path]]:
-    """(orientation, file) of each CSV, in the order of :data:`ORIENTATIONS`."""
+def _list_files(path: Path) -> list[tuple[str, str, Path]]:
+    """(orientation, split, file) of each CSV: training files first, each set in the
+    order of :data:`ORIENTATIONS`."""
     if path.is_file():
-        return [(_orientation(path), path)]
+        return [(*_orientation(path), path)]
     if not path.is_dir():
         raise SourceFormatError(f"{path}: no such file or folder")
     files = sorted(p for p in path.glob("*.csv") if p.is_file())
     if not files:
         raise SourceFormatError(
             f"{path}: no CSV files; expected bts3v2_palm_down.csv, "
-            "bts3v2_palm_side.csv, bts3v2_palm_45.csv"
+            "bts3v2_palm_side.csv, bts3v2_palm_45.csv (and their _test files)"
         )
-    seen: dict[str, Path] = {}
+    seen: dict[tuple[str, str], Path] = {}
     for file in files:
-        orientation = _orientation(file)
-        if orientation in seen:
+        key = _orientation(file)
+        if key in seen:
             raise SourceFormatError(
-                f"{file}: orientation {orientation!r} is also the one of "
-                f"{seen[orientation]}; expected one file per orientation"
+                f"{file}: orientation {key[0]!r} of the {key[1]} set is also the one "
+                f"of {seen[key]}; expected one file per orientation and set"
             )
-        seen[orientation] = file
-    return [(o, seen[o]) for o in ORIENTATIONS if o in seen]
+        seen[key] = file
+    return [
+        (o, split, seen[o, split])
+        for split in SPLITS
+        for o in ORIENTATIONS
+        if (o, split) in seen
+    ]
 
 
 def read_bts3v2(path: Path | str) -> Dataset:
@@ -91,14 +106,17 @@ def read_bts3v2(path: Path | str) -> Dataset:
     Parameters
     ----------
     path : path-like
-        The folder holding ``bts3v2_palm_{down,side,45}.csv``, or one of them.
+        The folder holding ``bts3v2_palm_{down,side,45}.csv`` and / or the
+        published test files ``bts3v2_palm_{down,side,45}_test.csv``, or one file.
 
     Returns
     -------
     Dataset
         Sensor ``biotac_sp_x3``; trial ids ``<orientation>/<row>`` (row: 0-based
-        data row, 4 digits); snapshot stream ``electrodes`` (72 channels as in the
-        header, raw ADC counts, ``t = 0`` s); groups ``object`` and ``orientation``
+        data row, 4 digits; ``<orientation>_test/<row>`` for a test file); trials
+        column ``published_split`` (``train``, ``test``: the file's set); snapshot
+        stream ``electrodes`` (72 channels as in the header, raw ADC counts,
+        ``t = 0`` s); groups ``object`` and ``orientation``
         (palm_down, palm_side, palm_45); labels ``slip_class`` (stable, slipped:
         column ``slipped`` 0, 1) and ``slip_onset_s`` (s; NaN, not recorded).
 
@@ -113,7 +131,7 @@ def read_bts3v2(path: Path | str) -> Dataset:
     entries = _list_files(path)
     blocks: list[np.ndarray] = []
     trial_parts: list[pd.DataFrame] = []
-    for orientation, file in entries:
+    for orientation, split, file in entries:
         df = read_csv_file(file)
         check_header(file, df.columns, HEADER)
         if df.empty:
@@ -135,12 +153,14 @@ def read_bts3v2(path: Path | str) -> Dataset:
             )
         blocks.append(numeric_block(file, df, CHANNELS))
         n = len(df)
+        stem = orientation if split == SPLITS[0] else f"{orientation}_test"
         trial_parts.append(
             pd.DataFrame(
                 {
-                    "trial_id": [f"{orientation}/{i:04d}" for i in range(n)],
+                    "trial_id": [f"{stem}/{i:04d}" for i in range(n)],
                     "object": obj.astype(str).to_numpy(dtype=object),
                     "orientation": orientation,
+                    "published_split": split,
                     "slip_class": np.asarray(CLASSES, dtype=object)[
                         slipped.astype(np.int64)
                     ],
@@ -188,7 +208,7 @@ def read_bts3v2(path: Path | str) -> Dataset:
             "license": LICENSE,
             "importer": "slipkit.data.importers.bts3v2.read_bts3v2",
             "imported_from": str(path),
-            "files": [file.name for _, file in entries],
+            "files": [file.name for _, _, file in entries],
         },
         name="bts3v2",
     )

@@ -5,8 +5,11 @@ grasp, taken before lifting, and whether the object then slipped. The hand grasp
 objects in three palm orientations (down, side, 45 deg). :class:`GraspStability`
 classifies stable vs slipped from that snapshot:
 
-* **Split by object.** ``test_size`` of the objects (all their grasps, all
-  orientations) are held out; no grasp of a test object is ever seen in training.
+* **Split by object.** When the dataset holds the published test files (trials
+  column ``published_split`` = ``test``: 10 objects recorded apart from the 41
+  training ones), they are the test set and the training files the training side.
+  Otherwise ``test_size`` of the objects (all their grasps, all orientations) are held
+  out. Either way no grasp of a test object is ever seen in training.
 * **Selection on the training objects only.** Each candidate family (logistic
   regression, RBF SVM, MLP: scikit-learn) gets an Optuna TPE search of its
   hyper-parameters and of the orientation handling (:class:`GraspFeatures`), scored by
@@ -59,6 +62,8 @@ log = logging.getLogger("slipkit.grasp")
 
 #: Orientation handling of :class:`GraspFeatures`.
 NORMALISE = ("none", "per_grasp", "shape", "orientation_feature", "per_orientation")
+#: Test sets of :class:`GraspStability` (``split``).
+SPLITS = ("auto", "published", "objects")
 #: Selection scoring of :class:`GraspStability`: the worst orientation's balanced accuracy.
 WORST_ORIENTATION = "worst_orientation_balanced_accuracy"
 #: Added to a pad's variance (counts^2) in ``shape``: a pad whose 24 electrodes read
@@ -352,7 +357,14 @@ class GraspStability(Task):
     orientations : sequence of str
         Its values, in column order (a dataset missing one still works).
     test_size : float
-        Fraction of the objects held out (all their grasps).
+        Fraction of the objects held out (all their grasps) when the test set is
+        drawn from the training objects.
+    split : {"auto", "published", "objects"}
+        The test set: the trials whose ``split_column`` reads ``test`` (the published
+        test files), ``test_size`` of the other objects (``objects``; published test
+        trials are then left out), or the first when the dataset has any (``auto``).
+    split_column : str
+        Trials column naming each grasp's published set (``train`` / ``test``).
     cv : int
         Folds of the group CV by object on the training side.
     scoring : str
@@ -384,6 +396,8 @@ class GraspStability(Task):
         orientation: str | None = "orientation",
         orientations: Sequence[str] = ("palm_down", "palm_side", "palm_45"),
         test_size: float = 0.2,
+        split: str = "auto",
+        split_column: str = "published_split",
         cv: int = 4,
         scoring: str = "balanced_accuracy",
         n_trials: int = 8,
@@ -398,6 +412,8 @@ class GraspStability(Task):
         self.orientation = orientation
         self.orientations = orientations
         self.test_size = test_size
+        self.split = split
+        self.split_column = split_column
         self.cv = cv
         self.scoring = scoring
         self.n_trials = n_trials
@@ -599,16 +615,48 @@ class GraspStability(Task):
         return out
 
     # -- fit --------------------------------------------------------------------------
-    def fit(self, model: Any, dataset: Dataset, *, seed: int, out: Path) -> TaskResult:
-        X, y, trials = self.arrays(dataset)
+    def _split(
+        self, dataset: Dataset, trials: pd.DataFrame, seed: int
+    ) -> tuple[np.ndarray, np.ndarray, str]:
+        """(train mask, test mask, what the test set is) over ``trials``."""
+        if self.split not in SPLITS:
+            raise SlipkitError(
+                f"task.split: {self.split!r}; expected one of {list(SPLITS)}"
+            )
+        col = str(self.split_column)
+        published = (
+            trials[col].astype(str).to_numpy() == "test"
+            if col in trials.columns
+            else np.zeros(len(trials), dtype=bool)
+        )
+        if self.split == "published" and not published.any():
+            raise SlipkitError(
+                f"task.split=published: no trial of {dataset.name!r} has {col} = "
+                "'test'; import the published test files (bts3v2_<orientation>"
+                "_test.csv) beside the training files, or set task.split=objects"
+            )
+        groups = trials[self.group].astype(str).to_numpy()
+        if self.split != "objects" and published.any():
+            shared = sorted(set(groups[published]) & set(groups[~published]))
+            if shared:
+                raise SlipkitError(
+                    f"{dataset.name!r}: objects {shared} are in both the published "
+                    f"training and test files ({col}); the test objects must be unseen"
+                )
+            return ~published, published, "published test files"
+        ids = trials["trial_id"].astype(str).to_numpy()
+        own = dataset.subset(list(ids[~published])) if published.any() else dataset
         try:
             split = split_by_group(
-                dataset, self.group, test_size=float(self.test_size), seed=seed
+                own, self.group, test_size=float(self.test_size), seed=seed
             )
         except (ValueError, KeyError) as exc:
             raise SlipkitError(f"cannot split {dataset.name!r}: {exc}") from None
-        ids = trials["trial_id"].astype(str).to_numpy()
-        tr, te = np.isin(ids, split.train), np.isin(ids, split.test)
+        return np.isin(ids, split.train), np.isin(ids, split.test), "held-out objects"
+
+    def fit(self, model: Any, dataset: Dataset, *, seed: int, out: Path) -> TaskResult:
+        X, y, trials = self.arrays(dataset)
+        tr, te, kind = self._split(dataset, trials, seed)
         groups = trials[self.group].astype(str).to_numpy()
         n_e = X.shape[1] - (1 if self.orientation is None else len(self.orientations))
         log.info(
@@ -704,6 +752,7 @@ class GraspStability(Task):
             "params": {"model": chosen, **records[chosen]["best"]},
             "split": {
                 "by": self.group,
+                "test_set": kind,
                 "train_objects": sorted(set(groups[tr])),
                 "test_objects": sorted(set(groups[te])),
                 "n_train": int(tr.sum()),
@@ -723,8 +772,16 @@ class GraspStability(Task):
         return TaskResult(final, metrics, _summary(metrics))
 
     def evaluate(self, model: Any, dataset: Dataset, *, out: Path) -> dict[str, Any]:
-        """Scores over every grasp of ``dataset`` as ``test`` (overall, per orientation)."""
+        """Scores over the grasps of ``dataset`` as ``test`` (overall, per
+        orientation): every grasp, or only the published test files' when the dataset
+        holds both sets."""
         X, y, trials = self.arrays(dataset)
+        col = str(self.split_column)
+        if col in trials.columns:
+            published = trials[col].astype(str).to_numpy() == "test"
+            if published.any() and not published.all():
+                X, y = X[published], y[published]
+                trials = trials[published].reset_index(drop=True)
         pred = np.asarray(model.predict(X)).astype(str)
         pd.DataFrame({"trial_id": trials["trial_id"], "label": y, "pred": pred}).to_csv(
             out / "predictions.csv", index=False
@@ -787,12 +844,12 @@ def _summary(metrics: Mapping[str, Any]) -> list[str]:
     orientations = list(te.get("per_orientation", {}))
     lines = [
         f"Grasp stability, split by {sp['by']}: {len(sp['train_objects'])} train objects "
-        f"({sp['n_train']} grasps) / {len(sp['test_objects'])} held-out objects "
-        f"({sp['n_test']} grasps)",
+        f"({sp['n_train']} grasps) / {len(sp['test_objects'])} test objects "
+        f"({sp['n_test']} grasps; {sp.get('test_set', 'held-out objects')})",
         "  " + format_best(metrics["selection"]),
         f"  validation ({val['cv']}, k={val['k']}): {val['scoring']} "
         f"{val[val['scoring']]:.4f} +- {val['std']:.4f}",
-        f"  held-out objects: accuracy {te['accuracy']:.4f}, balanced "
+        f"  test objects: accuracy {te['accuracy']:.4f}, balanced "
         f"{te['balanced_accuracy']:.4f}, recall "
         + ", ".join(f"{k} {v:.3f}" for k, v in te["recall"].items()),
         f"  majority control (always {maj['class']!r}): accuracy {maj['accuracy']:.4f}, "
@@ -844,6 +901,7 @@ def _summary(metrics: Mapping[str, Any]) -> list[str]:
 
 __all__: Sequence[str] = [
     "NORMALISE",
+    "SPLITS",
     "WORST_ORIENTATION",
     "GraspFeatures",
     "GraspStability",
