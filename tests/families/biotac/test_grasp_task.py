@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -74,6 +75,11 @@ def _relabel(dataset: Dataset, ids: list[str]) -> Dataset:
     trials.loc[rows, "slip_class"] = np.where(
         trials.loc[rows, "slip_class"] == "stable", "slipped", "stable"
     )
+    return _with_trials(dataset, trials)
+
+
+def _with_trials(dataset: Dataset, trials: pd.DataFrame) -> Dataset:
+    """``dataset`` with another trials table."""
     return Dataset(
         sensor=dataset.sensor,
         streams=dataset.streams,
@@ -292,17 +298,10 @@ def test_published_test_files_are_the_test_set_and_never_train(
         _task(split="published").fit(LogisticRegression(), alone, seed=0, out=tmp_path)
     trials = both.trials.copy()
     trials.loc[trials["trial_id"] == "palm_45_test/0000", "object"] = "obj0"
-    mixed = Dataset(
-        sensor=both.sensor,
-        streams=both.streams,
-        trials=trials,
-        tables=both.tables,
-        labels=both.labels,
-        groups=both.groups,
-        name="mixed",
-    )
     with pytest.raises(SlipkitError, match=r"objects \['obj0'\] are in both"):
-        _task().fit(LogisticRegression(), mixed, seed=0, out=tmp_path)
+        _task().fit(
+            LogisticRegression(), _with_trials(both, trials), seed=0, out=tmp_path
+        )
 
 
 def test_train_bts3v2_stability_end_to_end_on_a_synthetic_recording(
@@ -336,14 +335,7 @@ def test_train_bts3v2_stability_end_to_end_on_a_synthetic_recording(
     # slipkit evaluate on a recording of other objects: overall, per orientation, worst
     other = write_synthetic_bts3v2(tmp_path / "other_raw", n_objects=3, seed=5)
     folder = save_dataset(read_bts3v2(other), tmp_path / "other")
-    with initialize_config_dir(
-        config_dir=str(slipkit.config_dir()), version_base="1.3"
-    ):
-        ecfg = compose(
-            config_name="evaluate",
-            overrides=[f"run={run}", f"dataset={folder}", "name=other"],
-        )
-    scores = json.loads(evaluate_main(ecfg).read_text())["test"]
+    scores = _evaluate(run, folder, "other")
     assert 90 == scores["n"]
     assert set(ORIENTATIONS) == set(scores["per_orientation"])
     assert (
@@ -353,14 +345,20 @@ def test_train_bts3v2_stability_end_to_end_on_a_synthetic_recording(
     # beside its training files, only the published test files are scored
     write_synthetic_bts3v2(other, n_objects=2, seed=6, test=True)
     both = save_dataset(read_bts3v2(other), tmp_path / "both")
+    assert 60 == _evaluate(run, both, "both")["n"]
+
+
+def _evaluate(run: Path, dataset: Path, name: str) -> dict[str, Any]:
+    """``slipkit evaluate run=<run> dataset=<dataset>``: the test scores."""
     with initialize_config_dir(
         config_dir=str(slipkit.config_dir()), version_base="1.3"
     ):
-        ecfg = compose(
+        cfg = compose(
             config_name="evaluate",
-            overrides=[f"run={run}", f"dataset={both}", "name=both"],
+            overrides=[f"run={run}", f"dataset={dataset}", f"name={name}"],
         )
-    assert 60 == json.loads(evaluate_main(ecfg).read_text())["test"]["n"]
+    scores: dict[str, Any] = json.loads(evaluate_main(cfg).read_text())["test"]
+    return scores
 
 
 @pytest.mark.realdata
