@@ -260,8 +260,8 @@ def test_published_test_files_are_the_test_set_and_never_train(
     tmp_path: Path,
 ) -> None:
     """With the published test files imported, they are the test set (auto); with
-    split=objects they are left out; published without them, or an object in both
-    sets, is refused."""
+    split=objects they are left out; one set alone is split by object; published
+    without both sets, or an object in both sets, is refused."""
     raw = write_synthetic_bts3v2(tmp_path / "bts", n_objects=6)
     write_synthetic_bts3v2(raw, n_objects=3, seed=1, test=True)
     both = read_bts3v2(raw)
@@ -294,7 +294,10 @@ def test_published_test_files_are_the_test_set_and_never_train(
     assert not {"new0", "new1", "new2"} & set(
         m_obj["train_objects"] + m_obj["test_objects"]
     )
-    with pytest.raises(SlipkitError, match=r"task\.split=published: no trial"):
+    only_test = both.subset(test_ids.tolist())
+    m_test = _task(cv=2).fit(LogisticRegression(), only_test, seed=0, out=tmp_path)
+    assert "held-out objects" == m_test.metrics["split"]["test_set"]
+    with pytest.raises(SlipkitError, match=r"task\.split=published: .* needs trials"):
         _task(split="published").fit(LogisticRegression(), alone, seed=0, out=tmp_path)
     trials = both.trials.copy()
     trials.loc[trials["trial_id"] == "palm_45_test/0000", "object"] = "obj0"

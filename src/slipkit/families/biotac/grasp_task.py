@@ -361,8 +361,9 @@ class GraspStability(Task):
         drawn from the training objects.
     split : {"auto", "published", "objects"}
         The test set: the trials whose ``split_column`` reads ``test`` (the published
-        test files), ``test_size`` of the other objects (``objects``; published test
-        trials are then left out), or the first when the dataset has any (``auto``).
+        test files; the rest train), ``test_size`` of the objects (``objects``; a
+        dataset holding both sets leaves its test trials out), or the first when the
+        dataset holds both sets (``auto``).
     split_column : str
         Trials column naming each grasp's published set (``train`` / ``test``).
     cv : int
@@ -629,14 +630,18 @@ class GraspStability(Task):
             if col in trials.columns
             else np.zeros(len(trials), dtype=bool)
         )
-        if self.split == "published" and not published.any():
+        # Both sets present: the published split is there to use (a dataset of one
+        # set alone is split by object like any other).
+        both = bool(published.any() and not published.all())
+        if self.split == "published" and not both:
             raise SlipkitError(
-                f"task.split=published: no trial of {dataset.name!r} has {col} = "
-                "'test'; import the published test files (bts3v2_<orientation>"
-                "_test.csv) beside the training files, or set task.split=objects"
+                f"task.split=published: {dataset.name!r} needs trials with {col} = "
+                "'train' and 'test'; import the published test files (bts3v2_"
+                "<orientation>_test.csv) beside the training files, or set "
+                "task.split=objects"
             )
         groups = trials[self.group].astype(str).to_numpy()
-        if self.split != "objects" and published.any():
+        if self.split != "objects" and both:
             shared = sorted(set(groups[published]) & set(groups[~published]))
             if shared:
                 raise SlipkitError(
@@ -645,7 +650,7 @@ class GraspStability(Task):
                 )
             return ~published, published, "published test files"
         ids = trials["trial_id"].astype(str).to_numpy()
-        own = dataset.subset(list(ids[~published])) if published.any() else dataset
+        own = dataset.subset(list(ids[~published])) if both else dataset
         try:
             split = split_by_group(
                 own, self.group, test_size=float(self.test_size), seed=seed
