@@ -69,6 +69,39 @@ def test_scores_as_the_reports_contact_motion_and_streams_alike(
         np.testing.assert_allclose(got, s[seg == k], rtol=1e-12)
 
 
+def _two_fingertips() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Both fingertips side by side (the second sees the recordings in another order,
+    its pins of the third recording all lost), each fingertip alone, and the segments."""
+    X, seg = _recordings()
+    n = int((seg == 0).sum())
+    other = np.roll(X, n, axis=0)
+    other[seg == 2] = np.nan
+    return np.hstack([X, other]), X, other, seg
+
+
+def test_two_fingertips_score_the_larger_of_their_own_scores() -> None:
+    both, a, b, seg = _two_fingertips()
+    one = PinContactDetector(horizon=60, threshold=0.01)
+    two = PinContactDetector(horizon=60, threshold=0.01, fingertips=2)
+    two.fit(both, np.zeros(len(both), int), segments=seg)
+    s = two.decision_function(both, segments=seg)
+    alone = [
+        one.fit(x, np.zeros(len(x), int), segments=seg).decision_function(
+            x, segments=seg
+        )
+        for x in (a, b)
+    ]
+    np.testing.assert_array_equal(s, np.maximum(*alone))
+    assert np.isneginf(alone[1][seg == 2]).all()  # no pins: the first fingertip decides
+    np.testing.assert_array_equal(s[seg == 2], alone[0][seg == 2])
+    for k in range(3):
+        stream = two.stream()
+        got = np.array([stream.update(x)[0] for x in both[seg == k]])
+        np.testing.assert_allclose(got, s[seg == k], rtol=1e-12)
+    with pytest.raises(ValueError, match="2 fingertip"):
+        two.fit(a[:, :50], np.zeros(len(a), int), segments=seg)
+
+
 def test_runtime_pitch_is_the_features_pitch() -> None:
     X, _ = _recordings()
     for row in X[[0, 130, 300]]:
@@ -116,6 +149,8 @@ def test_contact_window_holds_the_reference_then_slides_and_resets() -> None:
         ({"window": 1}, "window"),
         ({"min_frames": 11}, "min_frames"),
         ({"horizon": 0}, "horizon"),
+        ({"fingertips": 0}, "fingertips"),
+        ({"fingertips": 3}, "3 x 2K"),
         ({"extra": 1}, "extra"),
     ],
 )
@@ -159,6 +194,25 @@ def test_onnx_graph_with_the_step_decides_as_the_detector(
     ctx = StreamContext("camera_0", [], [], [], lambda ids: [])
     steps = runtime_steps(det, ctx)
     assert steps.steps == list(graph.preprocessing)
+
+
+@pytest.mark.parametrize("opset", [17, 18])
+def test_two_fingertip_graph_decides_as_the_detector(opset: int) -> None:
+    from slipkit.export.detector_parity import check_detector_parity
+    from slipkit.families.gelsight.export import export_pin_contact
+
+    both, _, _, seg = _two_fingertips()
+    det = PinContactDetector(horizon=60, fingertips=2, threshold=0.01)
+    det.fit(both, np.zeros(len(both), int), segments=seg)
+    s = det.decision_function(both, segments=seg)
+    det.set_params(threshold=float(np.median(s[np.isfinite(s)])))
+    det.fit(both, np.zeros(len(both), int), segments=seg)
+    graph = export_pin_contact(det, opset=opset)
+    assert graph.preprocessing[0]["fingertips"] == 2
+    assert graph.input_shape == ("batch", 51, 100)
+    report = check_detector_parity(det, graph, both, segments=seg)
+    assert report["passed"], report
+    assert report["n_finite_mismatch"] == 0
 
 
 def test_bundle_in_the_runtime_loop_decides_as_the_detector(tmp_path: Path) -> None:

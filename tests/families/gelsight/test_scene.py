@@ -111,8 +111,14 @@ def test_the_dataset_reads_like_an_import() -> None:
         6, 0
     )
     trials, y, groups, _ = load_trials(ds)
-    assert set(ds.streams) == {"camera_0", "camera_2"}
+    assert set(ds.streams) == {"camera_0", "camera_2", "fingertips"}
+    assert set(trials[0]) == {"camera_0", "camera_2"}
     assert trials[0]["camera_0"].shape == (25, 60)
+    # the side-by-side stream: camera_0's block, then camera_2's
+    both = ds[ds.trial_ids[0]].streams["fingertips"]
+    assert ["camera_0_x_0", "camera_2_y_29"] == [both.columns[1], both.columns[-1]]
+    np.testing.assert_array_equal(both.iloc[:, 1:61].to_numpy(), trials[0]["camera_0"])
+    np.testing.assert_array_equal(both.iloc[:, 61:].to_numpy(), trials[0]["camera_2"])
     assert set(y) <= {0, 1}
     assert all(g.startswith("object_") for g in groups)
 

@@ -36,7 +36,7 @@ def test_tracks_a_sliding_grid_without_losing_or_swapping_pins(tmp_path: Path) -
 def test_importer_reads_labels_groups_and_pin_streams(trials_folder: Path) -> None:
     ds = read_gelsight(trials_folder, n_pins=12)
     assert ds.sensor == "gelsight"
-    assert sorted(ds.streams) == ["camera_0", "camera_2"]
+    assert sorted(ds.streams) == ["camera_0", "camera_2", "fingertips"]
     trials = ds.trials.set_index("trial_id")
     assert trials.loc["obj_a/exp_num_1", "slipped"] == 1.0
     assert trials.loc["obj_b/exp_num_1", "slipped"] == 0.0
@@ -44,6 +44,11 @@ def test_importer_reads_labels_groups_and_pin_streams(trials_folder: Path) -> No
     trial = ds.trial("obj_a/exp_num_1")
     x = trial.streams["camera_0"][[f"x_{i}" for i in range(12)]].to_numpy()
     assert np.allclose(x[-1] - x[0], 0.8 * 11, atol=1.0)
+    both = trial.streams["fingertips"]
+    assert len(both) == min(len(trial.streams[c]) for c in ("camera_0", "camera_2"))
+    np.testing.assert_array_equal(
+        both[[f"camera_0_x_{i}" for i in range(12)]].to_numpy(), x[: len(both)]
+    )
     assert ds.provenance["tracking"]["camera_0"]["matched_mean"] == 1.0
 
 

@@ -163,6 +163,8 @@ def contact_window_step(detector: PinContactDetector) -> dict[str, Any]:
     }
     if detector.horizon is not None:
         step["horizon"] = int(detector.horizon)
+    if int(detector.fingertips) > 1:
+        step["fingertips"] = int(detector.fingertips)
     return step
 
 
@@ -172,23 +174,36 @@ def export_pin_contact(
     """Export a fitted :class:`PinContactDetector`: one frame in, the runtime step
     ``contact_window`` (frame counter, pitch, held reference) before the graph.
 
-    Graph input ``(batch, W + 1, 2K)``: the step's window in pitches and its decide row.
-    The graph fits the affine map from the window's first to its last frame (``M = c
+    Graph input ``(batch, W + 1, F * 2K)``: the step's window in pitches and its
+    decide row, F fingertips side by side. Each fingertip becomes a row of the batch;
+    the graph fits the affine map from the window's first to its last frame (``M = c
     c^T``, ``G = c d^T``, ``trace(M^-1 G)`` through the constant adjugate, as
     :func:`export_pin_divergence`), sums the norms of the frame-to-frame mean pin
     steps (the path) and scores ``quantity``; a row that does not decide, or a
-    degenerate ``M``, scores ``NO_SCORE``.
+    degenerate ``M``, scores ``NO_SCORE``; the largest fingertip score is the score.
     """
     check_is_fitted(detector, "threshold_")
-    ch = int(detector.n_features_in_)
-    if ch < 6 or ch % 2:
+    total, tips = int(detector.n_features_in_), int(detector.fingertips)
+    ch = total // tips
+    if ch < 6 or ch % 2 or total % tips:
         raise ExportError(
-            f"PinContactDetector reads 2K pin channels (K >= 3); fit saw {ch}"
+            f"PinContactDetector reads {tips} x 2K pin channels (K >= 3); fit saw "
+            f"{total}"
         )
     k, w = ch // 2, int(detector.window)
     g = GraphBuilder("gelsight_pin_contact", opset)
-    inp, x = _prologue(g, w + 1, ch)
+    inp, x = _prologue(g, w + 1, total)
     i64 = np.int64
+    if tips > 1:  # (B, W+1, F*2K) -> (B*F, W+1, 2K): one fingertip per batch row
+        x = g.op(
+            "Reshape",
+            g.op(
+                "Transpose",
+                g.op("Reshape", x, g.const([-1, w + 1, tips, ch], i64)),
+                perm=[0, 2, 1, 3],
+            ),
+            g.const([-1, w + 1, ch], i64),
+        )
 
     def rows(a: int, b: int) -> str:
         return g.op("Slice", x, g.const([a], i64), g.const([b], i64), g.const([1], i64))
@@ -236,13 +251,22 @@ def export_pin_contact(
         )
     good = g.op("And", decide, g.op("Greater", det2, g.const(0.0, np.float64)))
     score = g.op("Where", good, score, g.const(-np.inf, np.float64))
+    if (
+        tips > 1
+    ):  # the largest fingertip score (ReduceMax takes axes as an input from opset 18)
+        per = g.op("Reshape", score, g.const([-1, tips], i64))
+        score = (
+            g.op("ReduceMax", per, axes=[1], keepdims=0)
+            if g.opset < 18
+            else g.op("ReduceMax", per, g.const([1], i64), keepdims=0)
+        )
     model = _finish(g, inp, score, f"PinContactDetector over {w} pin frames")
     graph = _graph(
         detector,
         model,
         opset=g.opset,
         window=1,
-        channels=ch,
+        channels=total,
         hop=1,
         first_decision=int(detector.arm) + int(detector.min_frames) - 1,
         score_meaning=(
@@ -250,8 +274,10 @@ def export_pin_contact(
             "(dimensionless; path in marker pitches); slip where score >= threshold"
         ),
         input_meaning=(
-            f"one frame of x_0..x_{k - 1}, y_0..y_{k - 1} (px); the runtime step "
-            f"contact_window makes the {w}-frame window in pitches and its decide row"
+            f"one frame of x_0..x_{k - 1}, y_0..y_{k - 1} (px)"
+            + (f" of each of {tips} fingertips in turn" if tips > 1 else "")
+            + f"; the runtime step contact_window makes the {w}-frame window in "
+            "pitches and its decide row"
         ),
         features={
             "n_pins": k,
@@ -259,11 +285,12 @@ def export_pin_contact(
             "arm": int(detector.arm),
             "horizon": detector.horizon,
             "quantity": detector.quantity,
+            **({"fingertips": tips} if tips > 1 else {}),
         },
     )
     return replace(
         graph,
-        input_shape=("batch", w + 1, ch),
+        input_shape=("batch", w + 1, total),
         preprocessing=(contact_window_step(detector),),
     )
 

@@ -136,8 +136,10 @@ class FeatureStream:
         if self._seen <= self.arm:
             return None
         pts = to_points(np.asarray(frame, dtype=np.float64)[None, :])[0]
-        if not self._buf:
+        if self._seen == self.arm + 1:  # the first armed frame sets the pitch
             self._pitch = pitch_of(pts)
+        if not self._pitch > 0:  # no pitch at the first armed frame: never a feature
+            return None
         self._buf.append(pts / self._pitch)
         if len(self._buf) > self.window:
             self._buf.pop(0)

@@ -28,6 +28,42 @@ def pin_channels(n_pins: int) -> tuple[str, ...]:
     return (*(f"x_{i}" for i in range(n_pins)), *(f"y_{i}" for i in range(n_pins)))
 
 
+#: the stream holding every fingertip's pins side by side (for a detector reading them all)
+FINGERTIPS = "fingertips"
+
+
+def fingertips_spec(
+    cameras: Sequence[str], n_pins: int, rate_hz: float, what: str = ""
+) -> StreamSpec:
+    """The :data:`FINGERTIPS` stream: ``<camera>_x_i``, ``<camera>_y_i`` of each camera
+    in turn (each fingertip's block as its own stream orders it)."""
+    channels = tuple(f"{cam}_{c}" for cam in cameras for c in pin_channels(n_pins))
+    return StreamSpec(
+        FINGERTIPS,
+        channels,
+        dict.fromkeys(channels, "px"),
+        rate_hz=float(rate_hz),
+        description=(
+            f"{what}GelSight fingertips {', '.join(cameras)} side by side: tracked "
+            "pin positions, image px, over the frames every fingertip holds"
+        ),
+    )
+
+
+def fingertips_frame(frames: dict[str, pd.DataFrame], n_pins: int) -> pd.DataFrame:
+    """One trial's :data:`FINGERTIPS` rows from its per-camera frames (``t`` and the pin
+    channels; extra columns such as ``trial_id`` are kept from the first camera)."""
+    n = min(len(df) for df in frames.values())
+    channels = list(pin_channels(n_pins))
+    first = next(iter(frames.values())).iloc[:n]
+    head = first.drop(columns=channels).reset_index(drop=True)
+    blocks = [
+        df[channels].iloc[:n].add_prefix(f"{cam}_").reset_index(drop=True)
+        for cam, df in frames.items()
+    ]
+    return pd.concat([head, *blocks], axis=1)
+
+
 def _trial_dirs(root: Path, cameras: Sequence[str]) -> list[Path]:
     if not root.is_dir():
         raise SourceFormatError(f"{root}: not a folder of <object>/<trial>/ folders")
@@ -95,7 +131,8 @@ def read_gelsight(
     -------
     Dataset
         Sensor ``gelsight``; trial ids ``<object>/<trial>``; streams ``camera_0``,
-        ``camera_2`` (``x_i``, ``y_i`` in px); group ``object``; labels ``slipped``
+        ``camera_2`` (``x_i``, ``y_i`` in px) and, with two or more cameras,
+        ``fingertips`` (both side by side, :func:`fingertips_frame`); group ``object``; labels ``slipped``
         (1: ``slip.txt`` present) and ``slip_onset_s`` (NaN: not recorded). The
         provenance holds the tracking accuracy per fingertip
         (:func:`tracking_summary`).
@@ -113,8 +150,10 @@ def read_gelsight(
         )
         for cam in cameras
     }
+    if len(cameras) > 1:
+        specs[FINGERTIPS] = fingertips_spec(cameras, int(n_pins), rate_hz)
     rows: list[dict[str, object]] = []
-    parts: dict[str, list[pd.DataFrame]] = {cam: [] for cam in cameras}
+    parts: dict[str, list[pd.DataFrame]] = {name: [] for name in specs}
     tracking: dict[str, dict[str, dict[str, float]]] = {}
     for d in _trial_dirs(root, cameras):
         trial_id = f"{d.parent.name}/{d.name}"
@@ -130,6 +169,10 @@ def read_gelsight(
             df.insert(0, "trial_id", trial_id)
             parts[cam].append(df)
             tracking[trial_id][cam] = tr.summary()
+        if FINGERTIPS in parts:
+            parts[FINGERTIPS].append(
+                fingertips_frame({c: parts[c][-1] for c in cameras}, int(n_pins))
+            )
         rows.append(
             {
                 "trial_id": trial_id,
@@ -150,7 +193,9 @@ def read_gelsight(
         sensor="gelsight",
         streams=specs,
         trials=pd.DataFrame(rows),
-        tables={cam: pd.concat(parts[cam], ignore_index=True) for cam in cameras},
+        tables={
+            name: pd.concat(part, ignore_index=True) for name, part in parts.items()
+        },
         labels=labels,
         groups=("object",),
         provenance={
@@ -167,4 +212,12 @@ def read_gelsight(
     )
 
 
-__all__ = ["CAMERAS", "pin_channels", "read_gelsight", "tracking_summary"]
+__all__ = [
+    "CAMERAS",
+    "FINGERTIPS",
+    "fingertips_frame",
+    "fingertips_spec",
+    "pin_channels",
+    "read_gelsight",
+    "tracking_summary",
+]

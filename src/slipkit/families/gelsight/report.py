@@ -49,6 +49,7 @@ from slipkit.families.gelsight.detectors import (
     WindowModelDetector,
     choose_threshold,
 )
+from slipkit.families.gelsight.importer import FINGERTIPS
 
 Factory = Callable[[], Any]
 
@@ -191,8 +192,9 @@ def candidates(seed: int, arm: int = 12) -> list[Candidate]:
 def load_trials(
     dataset: Dataset,
 ) -> tuple[list[Trial], np.ndarray, np.ndarray, list[str]]:
-    """Trials (fingertip -> pin rows), labels, groups and ids of an imported dataset."""
-    streams = sorted(dataset.streams)
+    """Trials (fingertip -> pin rows), labels, groups and ids of an imported dataset
+    (each fingertip's own stream; the side-by-side ``fingertips`` stream is left out)."""
+    streams = sorted(s for s in dataset.streams if s != FINGERTIPS)
     trials: list[Trial] = []
     ys: list[int] = []
     groups: list[str] = []

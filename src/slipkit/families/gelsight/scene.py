@@ -33,7 +33,13 @@ import numpy as np
 import pandas as pd
 
 from slipkit.data.dataset import LabelSpec, StreamSpec
-from slipkit.families.gelsight.importer import CAMERAS, pin_channels
+from slipkit.families.gelsight.importer import (
+    CAMERAS,
+    FINGERTIPS,
+    fingertips_frame,
+    fingertips_spec,
+    pin_channels,
+)
 from slipkit.families.gelsight.tracking import track_frames
 from slipkit.sim import params
 from slipkit.sim.core import SceneState, SimulationError, sample_times
@@ -241,17 +247,23 @@ class GelSightGrasp:
         return f"object_{k:02d}"
 
     def streams(self) -> dict[str, StreamSpec]:
-        """``camera_0`` and ``camera_2``: pin positions (px), as the importer writes."""
+        """``camera_0``, ``camera_2`` and ``fingertips``: pin positions (px), as the
+        importer writes."""
         channels = pin_channels(self.n_pins)
         return {
-            cam: StreamSpec(
-                cam,
-                channels,
-                dict.fromkeys(channels, "px"),
-                rate_hz=self.rate_hz,
-                description=f"simulated GelSight fingertip {cam}: tracked pin positions, px",
-            )
-            for cam in CAMERAS
+            **{
+                cam: StreamSpec(
+                    cam,
+                    channels,
+                    dict.fromkeys(channels, "px"),
+                    rate_hz=self.rate_hz,
+                    description=f"simulated GelSight fingertip {cam}: tracked pin positions, px",
+                )
+                for cam in CAMERAS
+            },
+            FINGERTIPS: fingertips_spec(
+                CAMERAS, self.n_pins, self.rate_hz, "simulated "
+            ),
         }
 
     def labels(self) -> dict[str, LabelSpec]:
@@ -401,6 +413,9 @@ class GelSightGrasp:
             df.insert(0, "t", state.time[cam])
             streams[cam] = df
             meta.update({f"{cam}.{k}": v for k, v in info.items()})
+        streams[FINGERTIPS] = fingertips_frame(
+            {cam: streams[cam] for cam in CAMERAS}, self.n_pins
+        )
         slipped = bool(state.truth["slipped"])
         labels = {
             "slipped": float(slipped),

@@ -177,14 +177,19 @@ class _ContactStream:
         horizon: int | None,
         min_frames: int,
         threshold: float,
+        fingertips: int = 1,
     ) -> None:
         self.quantity, self.threshold = quantity, threshold
         self.arm, self.horizon = arm, horizon
-        self._features = FeatureStream(window=window, arm=arm, min_frames=min_frames)
+        self._features = [
+            FeatureStream(window=window, arm=arm, min_frames=min_frames)
+            for _ in range(fingertips)
+        ]
         self.reset()
 
     def reset(self) -> None:
-        self._features.reset()
+        for f in self._features:
+            f.reset()
         self._t = 0
 
     def update(self, sample: Any) -> tuple[float, bool]:
@@ -192,21 +197,26 @@ class _ContactStream:
         self._t += 1
         if self.horizon is not None and t >= self.arm + self.horizon:
             return -np.inf, False
-        f = self._features.update(np.asarray(sample, dtype=np.float64).reshape(-1))
-        if f is None:
-            return -np.inf, False
-        s = float(contact_score(self.quantity, f))
-        s = s if np.isfinite(s) else -np.inf
+        frame = np.asarray(sample, dtype=np.float64).reshape(-1)
+        s = -np.inf
+        for stream, part in zip(
+            self._features, np.split(frame, len(self._features)), strict=True
+        ):
+            f = stream.update(part)
+            if f is not None:
+                v = float(contact_score(self.quantity, f))
+                s = max(s, v if np.isfinite(v) else -np.inf)
         return s, bool(s >= self.threshold)
 
 
 class PinContactDetector(PinDivergenceDetector):
-    """The contact-phase pin-field detector (the report's ``contact_motion``) on one
-    fingertip: armed ``arm`` frames into the recording, positions in pitches of the
-    first armed frame, the window from the first armed frame (held) until it holds
-    ``window`` frames, then the last ``window``; it scores ``quantity`` of the
-    affine fit and the field's path (:mod:`slipkit.families.gelsight.features`) and
-    stops watching ``horizon`` frames after arming.
+    """The contact-phase pin-field detector (the report's ``contact_motion``): armed
+    ``arm`` frames into the recording, positions in pitches of the first armed frame,
+    the window from the first armed frame (held) until it holds ``window`` frames,
+    then the last ``window``; it scores ``quantity`` of the affine fit and the field's
+    path (:mod:`slipkit.families.gelsight.features`) and stops watching ``horizon``
+    frames after arming. With ``fingertips`` > 1 a frame holds each fingertip's pins
+    in turn; each is scored on its own and the frame takes the largest score.
 
     Parameters
     ----------
@@ -220,6 +230,9 @@ class PinContactDetector(PinDivergenceDetector):
         Frames after arming it watches (None: the whole recording).
     min_frames : int
         Armed frames before the first score.
+    fingertips : int
+        Fingertips side by side in a frame (``2K`` channels each: the importer's
+        ``fingertips`` stream holds both).
     threshold, roc_point, quantile
         As :class:`PinDivergenceDetector` (the task's operating point chooses it).
     """
@@ -232,6 +245,7 @@ class PinContactDetector(PinDivergenceDetector):
         "arm": [Interval(Integral, 0, None, closed="left")],
         "horizon": [Interval(Integral, 1, None, closed="left"), None],
         "min_frames": [Interval(Integral, 2, 50, closed="both")],
+        "fingertips": [Interval(Integral, 1, 8, closed="both")],
     }
 
     def __init__(
@@ -242,6 +256,7 @@ class PinContactDetector(PinDivergenceDetector):
         arm: int = 3,
         horizon: int | None = 200,
         min_frames: int = 5,
+        fingertips: int = 1,
         threshold: float | None = None,
         roc_point: str = "youden",
         quantile: float = 0.99,
@@ -253,17 +268,31 @@ class PinContactDetector(PinDivergenceDetector):
         self.arm = arm
         self.horizon = horizon
         self.min_frames = min_frames
+        self.fingertips = fingertips
+
+    def _check_X(self, X: Any, *, reset: bool) -> FloatArray:
+        Xv = StreamDetector._check_X(self, X, reset=reset)
+        n = int(self.fingertips)
+        if Xv.shape[1] % (2 * n) or Xv.shape[1] < 6 * n:
+            raise ValueError(
+                f"{type(self).__name__} reads {n} fingertip(s) of pin frames x_0..x_{{K-1}}, "
+                f"y_0..y_{{K-1}} each (2K channels per fingertip, K >= 3 pins); X has "
+                f"{Xv.shape[1]}"
+            )
+        return Xv
 
     def _scores(self, X: FloatArray) -> FloatArray:
-        f = trial_features(
-            X,
-            window=int(self.window),
-            arm=int(self.arm),
-            min_frames=int(self.min_frames),
-        )
-        with np.errstate(invalid="ignore", divide="ignore"):
-            s = contact_score(self.quantity, f)
-        s = np.where(np.isfinite(s), s, -np.inf)
+        s = np.full(len(X), -np.inf)
+        for part in np.split(X, int(self.fingertips), axis=1):
+            f = trial_features(
+                part,
+                window=int(self.window),
+                arm=int(self.arm),
+                min_frames=int(self.min_frames),
+            )
+            with np.errstate(invalid="ignore", divide="ignore"):
+                one = contact_score(self.quantity, f)
+            s = np.maximum(s, np.where(np.isfinite(one), one, -np.inf))
         if self.horizon is not None:
             s[int(self.arm) + int(self.horizon) :] = -np.inf
         return s
@@ -276,6 +305,7 @@ class PinContactDetector(PinDivergenceDetector):
             None if self.horizon is None else int(self.horizon),
             int(self.min_frames),
             float(self.threshold_),
+            int(self.fingertips),
         )
 
 

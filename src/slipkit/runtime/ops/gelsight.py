@@ -9,7 +9,9 @@ frame counter, the pitch and the frames are kept here, in numpy, and the graph d
 pin-field math on a fixed-size window.
 
 Input: one frame per call, ``(1, 2K)`` pin positions ``x_0..x_{K-1}, y_0..y_{K-1}``
-(px). Output ``(window + 1, 2K)`` float64:
+(px), or ``(1, F * 2K)`` for ``fingertips`` = F fingertips side by side, each held on
+its own (its own pitch and reference). Output ``(window + 1, F * 2K)`` float64, per
+fingertip block:
 
 * rows ``0 .. window - 1``: the window in pitches, oldest first, minus the mean pin
   position of its first frame (small numbers survive the graph's float32 input). A
@@ -21,7 +23,8 @@ Input: one frame per call, ``(1, 2K)`` pin positions ``x_0..x_{K-1}, y_0..y_{K-1
   (the graph then scores ``NO_SCORE``).
 
 Parameters: ``arm`` (int >= 0), ``window`` (int >= 2), ``min_frames`` (int, 1 ..
-``window``), ``horizon`` (int >= 1, optional: absent = the whole recording). The state
+``window``), ``horizon`` (int >= 1, optional: absent = the whole recording),
+``fingertips`` (int 1 .. 8, optional: absent = 1). The state
 depends on frames before the window (``stream_state``): the loop resets it where a new
 recording starts.
 """
@@ -72,10 +75,12 @@ class _ContactWindow:
         min_frames: int,
         horizon: int | None,
         channels: int,
+        fingertips: int = 1,
     ) -> None:
         self.arm, self.window, self.min_frames = arm, window, min_frames
         self.horizon = horizon
-        self.k = channels // 2
+        self.fingertips = fingertips
+        self.k = channels // (2 * fingertips)
         self.out_shape: tuple[int, ...] = (window + 1, channels)
         self._out = np.zeros(self.out_shape)
         self._ring = np.zeros((window, channels))
@@ -85,7 +90,7 @@ class _ContactWindow:
         """Forget the stream (a new recording starts with the next call)."""
         self._seen = 0
         self._armed = 0
-        self.pitch = math.nan
+        self.pitches = [math.nan] * self.fingertips
 
     def _deciding(self, t: int) -> bool:
         if t < self.arm:
@@ -100,35 +105,52 @@ class _ContactWindow:
         if not self._deciding(t):
             return out
         frame = x[-1]
+        k = self.k
         if self._armed == 0:
-            self.pitch = marker_pitch(frame)
+            self.pitches = [
+                marker_pitch(frame[2 * k * b : 2 * k * (b + 1)])
+                for b in range(self.fingertips)
+            ]
         w = self.window
         self._ring[self._armed % w] = frame
         self._armed += 1
-        if self._armed < self.min_frames or not (self.pitch > 0):
+        if self._armed < self.min_frames:
             return out
         n = min(self._armed, w)
         order = (self._armed - n + np.arange(n)) % w
-        body = out[:w]
-        body[w - n :] = self._ring[order]
-        body[: w - n] = body[w - n]
-        k = self.k
-        ref = body[0]
-        body[:, :k] -= np.nanmean(ref[:k])
-        body[:, k:] -= np.nanmean(ref[k:])
-        body /= self.pitch
-        out[w, 0] = 1.0
+        for b, pitch in enumerate(self.pitches):
+            if not pitch > 0:  # this fingertip cannot decide (too few pins)
+                continue
+            cols = slice(2 * k * b, 2 * k * (b + 1))
+            body = out[:w, cols]
+            body[w - n :] = self._ring[order, cols]
+            body[: w - n] = body[w - n]
+            ref = body[0]
+            body[:, :k] -= np.nanmean(ref[:k])
+            body[:, k:] -= np.nanmean(ref[k:])
+            body /= pitch
+            out[w, 2 * k * b] = 1.0
         return out
 
 
 @register_op("contact_window")
 def _contact_window(f: Fields, in_shape: tuple[int, ...]) -> Op:
-    f.only(("op", "arm", "window", "min_frames", "horizon"))
-    if len(in_shape) != 2 or in_shape[0] != 1 or in_shape[1] % 2 or in_shape[1] < 6:
+    f.only(("op", "arm", "window", "min_frames", "horizon", "fingertips"))
+    tips = (
+        1
+        if f.obj.get("fingertips") is None
+        else f.integer("fingertips", minimum=1, maximum=8)
+    )
+    if (
+        len(in_shape) != 2
+        or in_shape[0] != 1
+        or in_shape[1] % (2 * tips)
+        or in_shape[1] < 6 * tips
+    ):
         raise f.error(
             "op",
-            "needs one frame of 2K pin positions (K >= 3), a window of shape "
-            f"(1, 2K); the step's input is {list(in_shape)}",
+            f"needs one frame of {tips} x 2K pin positions (K >= 3), a window of "
+            f"shape (1, {tips} * 2K); the step's input is {list(in_shape)}",
         )
     arm = f.integer("arm", minimum=0, maximum=MAX_FRAMES)
     window = f.integer("window", minimum=2, maximum=MAX_WINDOW)
@@ -138,4 +160,4 @@ def _contact_window(f: Fields, in_shape: tuple[int, ...]) -> Op:
         if f.obj.get("horizon") is None
         else f.integer("horizon", minimum=1, maximum=MAX_FRAMES)
     )
-    return _ContactWindow(arm, window, min_frames, horizon, int(in_shape[1]))
+    return _ContactWindow(arm, window, min_frames, horizon, int(in_shape[1]), tips)
