@@ -93,6 +93,9 @@ def test_fingertips_must_agree_when_asked() -> None:
     agree = PinMotionDetector(quantity="divergence", arm=3, fingers="min")
     assert lone.trial_score(one) == pytest.approx(lone.trial_score(two))
     assert agree.trial_score(one) < 1e-6 < agree.trial_score(two)
+    first = PinMotionDetector(quantity="divergence", arm=3, fingers="first")
+    assert first.trial_score(one) == pytest.approx(lone.trial_score(one))
+    assert first.trial_score({"camera_0": still, "camera_2": moved}) < 1e-6
 
 
 @pytest.mark.parametrize(

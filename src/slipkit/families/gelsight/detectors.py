@@ -7,7 +7,8 @@ over the fingertips; it *fires* at the first frame whose score reaches ``thresho
 and a trial counts as slip when it ever fires. ``horizon`` (frames after arming; None:
 the whole recording) limits what a detector watches to the contact phase: it knows the
 time since the recording started, never the clip's length. ``fingers="min"`` asks every
-fingertip to agree (an object sliding out moves both gels; a wiggle can twist one).
+fingertip to agree (an object sliding out moves both gels; a wiggle can twist one);
+``fingers="first"`` reads the first fingertip alone (``camera_0``).
 ``threshold_`` is chosen by
 :func:`choose_threshold` on out-of-fold trial scores of the training side
 (:mod:`slipkit.families.gelsight.report`), never on the trials scored.
@@ -111,8 +112,8 @@ class _Detector:
             )
         if horizon is not None and int(horizon) < 1:
             raise SlipkitError(f"horizon={horizon}: at least 1 frame, or None")
-        if fingers not in ("max", "min"):
-            raise SlipkitError(f"fingers={fingers!r}: expected 'max' or 'min'")
+        if fingers not in ("max", "min", "first"):
+            raise SlipkitError(f"fingers={fingers!r}: expected 'max', 'min' or 'first'")
         self.window, self.arm = int(window), int(arm)
         self.horizon = None if horizon is None else int(horizon)
         self.fingers = fingers
@@ -143,9 +144,13 @@ class _Detector:
 
     def frame_scores(self, trial: Trial) -> FloatArray:
         """Score per frame over the fingertips (NaN while warming up and after the
-        horizon): the largest (``fingers="max"``), or the smallest (``"min"``: every
-        fingertip must agree, as when the object slides past both gels)."""
-        per = [self.finger_scores(f) for f in trial.values()]
+        horizon): the largest (``fingers="max"``), the smallest (``"min"``: every
+        fingertip must agree, as when the object slides past both gels), or the first
+        fingertip's (``"first"``)."""
+        tips = list(trial.values())
+        if self.fingers == "first":
+            tips = tips[:1]
+        per = [self.finger_scores(f) for f in tips]
         n = min(len(p) for p in per)
         stacked = np.stack([p[:n] for p in per])
         out = np.full(n, np.nan)

@@ -112,6 +112,24 @@ def candidates(seed: int, arm: int = 12) -> list[Candidate]:
             ),
         ),
         Candidate(
+            "contact_motion_one",
+            tuple(
+                (
+                    f"{q} h{h}",
+                    partial(
+                        PinMotionDetector,
+                        quantity=q,
+                        window=50,
+                        arm=CONTACT_ARMS[0],
+                        horizon=h,
+                        fingers="first",
+                    ),
+                )
+                for q in ("divergence", "contraction", "divergence_per_path")
+                for h in CONTACT_HORIZONS
+            ),
+        ),
+        Candidate(
             "window_logistic",
             tuple(
                 (
