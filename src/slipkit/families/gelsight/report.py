@@ -69,6 +69,26 @@ class Candidate:
     kind: str = "detector"  # or "control"
 
 
+def _contact_settings(fingers: Sequence[str]) -> tuple[tuple[str, Factory], ...]:
+    """``contact_motion``'s settings: quantity x horizon x how fingertips combine."""
+    return tuple(
+        (
+            f"{q} h{h} {f}",
+            partial(
+                PinMotionDetector,
+                quantity=q,
+                window=50,
+                arm=CONTACT_ARMS[0],
+                horizon=h,
+                fingers=f,
+            ),
+        )
+        for q in ("divergence", "contraction", "divergence_per_path")
+        for h in CONTACT_HORIZONS
+        for f in fingers
+    )
+
+
 def candidates(seed: int, arm: int = 12) -> list[Candidate]:
     """Every detector and control of the report, with their settings (the streaming
     detectors armed ``arm`` frames into a recording)."""
@@ -92,43 +112,8 @@ def candidates(seed: int, arm: int = 12) -> list[Candidate]:
                 for w in (25, 50)
             ),
         ),
-        Candidate(
-            "contact_motion",
-            tuple(
-                (
-                    f"{q} h{h} {f}",
-                    partial(
-                        PinMotionDetector,
-                        quantity=q,
-                        window=50,
-                        arm=CONTACT_ARMS[0],
-                        horizon=h,
-                        fingers=f,
-                    ),
-                )
-                for q in ("divergence", "contraction", "divergence_per_path")
-                for h in CONTACT_HORIZONS
-                for f in ("max", "min")
-            ),
-        ),
-        Candidate(
-            "contact_motion_one",
-            tuple(
-                (
-                    f"{q} h{h}",
-                    partial(
-                        PinMotionDetector,
-                        quantity=q,
-                        window=50,
-                        arm=CONTACT_ARMS[0],
-                        horizon=h,
-                        fingers="first",
-                    ),
-                )
-                for q in ("divergence", "contraction", "divergence_per_path")
-                for h in CONTACT_HORIZONS
-            ),
-        ),
+        Candidate("contact_motion", _contact_settings(("max", "min"))),
+        Candidate("contact_motion_one", _contact_settings(("first",))),
         Candidate(
             "window_logistic",
             tuple(
