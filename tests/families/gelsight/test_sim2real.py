@@ -17,7 +17,7 @@ from slipkit.errors import SlipkitError
 from slipkit.families.gelsight.report import load_trials
 from slipkit.families.gelsight.report import run as report_run
 from slipkit.families.gelsight.scene import GelSightGrasp
-from slipkit.families.gelsight.sim2real import main, run, sim_to_real
+from slipkit.families.gelsight.sim2real import Loaded, main, run, sim_to_real
 from slipkit.sim.core import Scene
 
 
@@ -44,13 +44,45 @@ def test_a_detector_chosen_on_simulation_separates_another_simulated_set() -> No
     assert majority["balanced_accuracy"] == 0.5
 
 
-def test_the_command_can_leave_the_real_column_out(tmp_path: Path) -> None:
+def test_the_command_can_leave_the_real_column_out(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     data = save_dataset(simulated(0, 12), tmp_path / "sim")
     out = tmp_path / "res.json"
     args = ["--real", str(data), "--sim", str(data), "--seeds", "0", "--only"]
     main([*args, "majority", "--skip-real", "--out", str(out)])
     res = json.loads(out.read_text().replace("NaN", "null"))
     assert res["results"]["majority"]["real"]["balanced_accuracy"]["mean"] is None
+    sim = res["results"]["majority"]["sim"]
+    assert sim["balanced_accuracy_full_length"] == {"mean": 0.5, "sd": 0.0}
+    header, _, row = capsys.readouterr().out.splitlines()[:3]
+    assert header.count("full-length clips") == 2
+    assert row.endswith("| n/a | n/a |")
+
+
+def clips(lengths: list[int], y: list[int]) -> Loaded:
+    """Trials of two fingertips that are only ``lengths`` frames long: what a control
+    of clip length reads."""
+    trials = [
+        {"camera_0": np.zeros((n, 4)), "camera_2": np.zeros((n, 4))} for n in lengths
+    ]
+    groups = np.array([f"o{i % 4}" for i in range(len(y))])
+    return trials, np.array(y), groups, [str(i) for i in range(len(y))]
+
+
+def test_the_full_length_column_scores_only_the_full_length_real_trials() -> None:
+    # simulated clips all 100 frames; real ones 150 frames, but half the slips stopped
+    # early (60): clip length marks those slips, and nothing on the full-length trials
+    sim = clips([100] * 8, [0, 1] * 4)
+    real = clips([150, 60, 150, 150, 150, 60, 150, 150], [0, 1] * 4)
+    res = sim_to_real("clip_length", sim, real, seed=0)
+    assert res["balanced_accuracy"] == 0.75
+    assert res["balanced_accuracy_full_length"] == 0.5
+    # without both classes among the full-length trials there is no such score
+    only_wiggles = clips([150, 60, 150, 60], [0, 1, 0, 1])
+    res = sim_to_real("clip_length", sim, only_wiggles, seed=0)
+    assert res["balanced_accuracy"] == 1.0
+    assert np.isnan(res["balanced_accuracy_full_length"])
 
 
 def test_run_reports_both_sides_over_seeds() -> None:
@@ -67,6 +99,15 @@ def test_run_reports_both_sides_over_seeds() -> None:
     assert (
         again["results"]["clip_length"]["real"] == res["results"]["clip_length"]["real"]
     )
+    # the full-length column on both sides; trained on real, the report's own
+    clip = again["results"]["clip_length"]
+    full = "balanced_accuracy_full_length"
+    assert clip["real"][full] == reported["results"]["clip_length"][full]
+    # equal-length clips: every trial is full length
+    assert clip["sim"][full] == clip["sim"]["balanced_accuracy"]
+    del reported["results"]["clip_length"]["per_seed"][0][full]
+    with pytest.raises(SlipkitError, match=full):
+        run(real, sims, [0, 1], ["clip_length"], real_report=reported)
     skipped = run(real, sims[:1], [0], ["majority"], skip_real=True)
     assert np.isnan(skipped["results"]["majority"]["real"]["balanced_accuracy"]["mean"])
     with pytest.raises(SlipkitError, match="seed 2"):

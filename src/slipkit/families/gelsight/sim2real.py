@@ -12,7 +12,10 @@ simulated objects (:func:`~slipkit.families.gelsight.report.choose_setting`), an
 refitted on the whole simulated set. It then scores every real trial once: nothing of
 the real set is used to train or choose. The trained-on-real column is the report's
 nested group CV over the real objects with the same seed, pooled over the held-out
-folds, so both columns score the same 150 real trials. Mean and sd over the seeds.
+folds, so both columns score the same 150 real trials. Each side also gives the
+balanced accuracy on the real full-length trials alone
+(:func:`~slipkit.families.gelsight.report.full_length`: where clip length carries no
+label), the report's full-length column. Mean and sd over the seeds.
 """
 
 from __future__ import annotations
@@ -29,21 +32,29 @@ import numpy as np
 from slipkit.data.dataset import Dataset
 from slipkit.errors import SlipkitError
 from slipkit.families.gelsight.detectors import Trial
+from slipkit.families.gelsight.importer import FINGERTIPS
 from slipkit.families.gelsight.report import (
     candidates,
     check_json_out,
     choose_setting,
     evaluate,
+    full_length,
     load_trials,
     pooled,
     write_json_out,
 )
 
-KEYS = ("balanced_accuracy", "slip_recall", "wiggle_false_alarm")
+KEYS = (
+    "balanced_accuracy",
+    "balanced_accuracy_full_length",
+    "slip_recall",
+    "wiggle_false_alarm",
+)
 
 
 def _check_streams(real: Dataset, sim: Dataset, where: str) -> None:
-    missing = sorted(set(real.streams) - set(sim.streams))
+    """The simulated set holds every fingertip stream the report reads of the real set."""
+    missing = sorted(set(real.streams) - set(sim.streams) - {FINGERTIPS})
     if missing:
         raise SlipkitError(
             f"{where}: the simulated set lacks the real set's streams {missing}"
@@ -63,7 +74,8 @@ def sim_to_real(
     inner: int = 4,
 ) -> dict[str, Any]:
     """One candidate trained and chosen on the simulated trials ``sim``, scored on every
-    real trial (both as :func:`~slipkit.families.gelsight.report.load_trials` gives)."""
+    real trial (both as :func:`~slipkit.families.gelsight.report.load_trials` gives);
+    ``balanced_accuracy_full_length`` over the real full-length trials alone."""
     cand = next(c for c in candidates(seed, arm) if c.name == cand_name)
     st, sy, sg, _ = sim
     rt, ry, _, _ = real
@@ -74,7 +86,7 @@ def sim_to_real(
         a = det.alarm(trial)
         fired[i] = a is not None
         first[i] = np.nan if a is None else a
-    return {**pooled(fired, first, ry), "chosen": label}
+    return {**pooled(fired, first, ry, full_length(rt)), "chosen": label}
 
 
 def _reported(report: dict[str, Any], name: str, seed: int) -> dict[str, Any]:
@@ -87,6 +99,12 @@ def _reported(report: dict[str, Any], name: str, seed: int) -> dict[str, Any]:
             f"(seeds {seeds}, detectors {sorted(report.get('results', {}))})"
         )
     result: dict[str, Any] = row["per_seed"][seeds.index(seed)]
+    missing = [k for k in KEYS if k not in result]
+    if missing:
+        raise SlipkitError(
+            f"--real-report: the result of {name!r} lacks {missing}: "
+            "not the JSON of this version's report"
+        )
     return result
 
 
@@ -157,18 +175,23 @@ def run(
 
 def _row(name: str, r: dict[str, Any]) -> str:
     def ms(side: str, k: str) -> str:
+        if not math.isfinite(r[side][k]["mean"]):
+            return "n/a"
         return f"{r[side][k]['mean']:.2f} ± {r[side][k]['sd']:.2f}"
 
     return (
         f"| {name} | {r['kind']} | {ms('sim', 'balanced_accuracy')} | "
+        f"{ms('sim', 'balanced_accuracy_full_length')} | "
         f"{ms('sim', 'slip_recall')} | {ms('sim', 'wiggle_false_alarm')} | "
-        f"{ms('real', 'balanced_accuracy')} |"
+        f"{ms('real', 'balanced_accuracy')} | "
+        f"{ms('real', 'balanced_accuracy_full_length')} |"
     )
 
 
 HEADER = (
-    "| detector | kind | trained on sim: balanced accuracy | slip recall | "
-    "wiggle false alarms | trained on real: balanced accuracy |\n|---|---|---|---|---|---|"
+    "| detector | kind | trained on sim: balanced accuracy | full-length clips | "
+    "slip recall | wiggle false alarms | trained on real: balanced accuracy | "
+    "full-length clips |\n|---|---|---|---|---|---|---|---|"
 )
 
 
