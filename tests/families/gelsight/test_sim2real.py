@@ -112,3 +112,22 @@ def test_run_reports_both_sides_over_seeds() -> None:
     assert np.isnan(skipped["results"]["majority"]["real"]["balanced_accuracy"]["mean"])
     with pytest.raises(SlipkitError, match="seed 2"):
         run(real, sims[:1], [2], ["clip_length"], real_report=reported)
+
+
+def test_a_simulated_set_needs_the_fingertip_streams_the_report_reads() -> None:
+    from types import SimpleNamespace
+    from typing import Any, cast
+
+    from slipkit.families.gelsight.sim2real import _check_streams
+
+    def ds(*names: str) -> Any:
+        return cast(Any, SimpleNamespace(streams=dict.fromkeys(names)))
+
+    real = ds("camera_0", "camera_2", "fingertips")
+    _check_streams(
+        real, ds("camera_0", "camera_2"), "sim"
+    )  # the side-by-side stream is not read
+    with pytest.raises(
+        SlipkitError, match=r"lacks the real set's streams \['camera_2'\]"
+    ):
+        _check_streams(real, ds("camera_0", "fingertips"), "sim")
