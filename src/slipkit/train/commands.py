@@ -190,7 +190,10 @@ def _shared_trials(info: dict[str, Any], dataset: Any) -> int | None:
 
 
 def _overlap_line(info: dict[str, Any]) -> str:
-    """One warning line when the evaluated dataset overlaps the training data."""
+    """One warning line when the evaluated dataset overlaps the training data (none
+    when the task scored only trials its fit never trains on: ``held_out_only``)."""
+    if info.get("held_out_only"):
+        return ""
     if info["seen_in_training"]:
         return (
             "warning: this is the training dataset (same fingerprint): the scores "
@@ -457,6 +460,7 @@ def evaluate_main(cfg: DictConfig) -> Path:
                 "seen_in_training": fingerprint
                 == run.info.get("dataset", {}).get("fingerprint"),
                 "trials_in_training_dataset": _shared_trials(run.info, dataset),
+                "held_out_only": bool(metrics.get("held_out_only", False)),
             },
             **jsonable(metrics),
         }

@@ -21,7 +21,7 @@ from slipkit.data.importers.bts3v2 import CHANNELS, ORIENTATIONS, read_bts3v2
 from slipkit.data.io import save_dataset
 from slipkit.errors import SlipkitError
 from slipkit.families.biotac.grasp_task import GraspFeatures, GraspStability
-from slipkit.train.commands import evaluate_main, train_main
+from slipkit.train.commands import _overlap_line, evaluate_main, train_main
 
 #: Per-orientation electrode baselines (counts): the shift the task must cope with.
 BASELINE = {"palm_down": 2800.0, "palm_side": 2950.0, "palm_45": 3150.0}
@@ -338,7 +338,9 @@ def test_train_bts3v2_stability_end_to_end_on_a_synthetic_recording(
     # slipkit evaluate on a recording of other objects: overall, per orientation, worst
     other = write_synthetic_bts3v2(tmp_path / "other_raw", n_objects=3, seed=5)
     folder = save_dataset(read_bts3v2(other), tmp_path / "other")
-    scores = _evaluate(run, folder, "other")
+    payload = _evaluate(run, folder, "other")
+    assert not payload["dataset"]["held_out_only"]
+    scores = payload["test"]
     assert 90 == scores["n"]
     assert set(ORIENTATIONS) == set(scores["per_orientation"])
     assert (
@@ -348,11 +350,18 @@ def test_train_bts3v2_stability_end_to_end_on_a_synthetic_recording(
     # beside its training files, only the published test files are scored
     write_synthetic_bts3v2(other, n_objects=2, seed=6, test=True)
     both = save_dataset(read_bts3v2(other), tmp_path / "both")
-    assert 60 == _evaluate(run, both, "both")["n"]
+    payload = _evaluate(run, both, "both")
+    assert 60 == payload["test"]["n"]
+    # never trained on, whatever the run: no warning even on the run's own dataset
+    assert payload["dataset"]["held_out_only"]
+    assert "" == _overlap_line({**payload["dataset"], "seen_in_training": True})
+    assert _overlap_line(
+        {**payload["dataset"], "held_out_only": False, "seen_in_training": True}
+    )
 
 
 def _evaluate(run: Path, dataset: Path, name: str) -> dict[str, Any]:
-    """``slipkit evaluate run=<run> dataset=<dataset>``: the test scores."""
+    """``slipkit evaluate run=<run> dataset=<dataset>``: its metrics.json."""
     with initialize_config_dir(
         config_dir=str(slipkit.config_dir()), version_base="1.3"
     ):
@@ -360,8 +369,8 @@ def _evaluate(run: Path, dataset: Path, name: str) -> dict[str, Any]:
             config_name="evaluate",
             overrides=[f"run={run}", f"dataset={dataset}", f"name={name}"],
         )
-    scores: dict[str, Any] = json.loads(evaluate_main(cfg).read_text())["test"]
-    return scores
+    payload: dict[str, Any] = json.loads(evaluate_main(cfg).read_text())
+    return payload
 
 
 @pytest.mark.realdata
