@@ -36,9 +36,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pandas as pd
 from sklearn.model_selection import GroupKFold
 
+from slipkit._files import check_out_file, read_json_object, write_out_file
 from slipkit.data.dataset import Dataset
+from slipkit.errors import SlipkitError
 from slipkit.families.gelsight.detectors import (
     ClipLengthControl,
     FirstFramesControl,
@@ -405,7 +408,6 @@ def run_split(
     ``slipkit train`` run on this dataset: ``metrics.json`` ``split``), the setting and
     threshold chosen by inner group CV on its training trials, its test trials scored
     once; beside them each run's own test trial events (``test.operating_point``)."""
-    from slipkit.errors import SlipkitError
 
     trials, y, g, ids = load_trials(dataset)
     index = {t: i for i, t in enumerate(ids)}
@@ -466,10 +468,6 @@ def _run_trials(
 ) -> dict[str, float]:
     """A run's own test trial events (``test_trials.csv``: the deployed detector's
     alarms at its operating point) as :func:`pooled` rates over those trials."""
-    import pandas as pd
-
-    from slipkit.errors import SlipkitError
-
     path = run / "test_trials.csv"
     try:
         t = pd.read_csv(path)
@@ -486,8 +484,6 @@ def _run_trials(
 def _is_results(path: Path) -> bool:
     """Whether ``path`` holds results this module wrote (a JSON object with
     ``results``): what ``--out`` may replace."""
-    from slipkit._files import read_json_object
-
     obj = read_json_object(path)
     return obj is not None and "results" in obj
 
@@ -496,8 +492,6 @@ def check_json_out(out: str | None, inputs: dict[str, str | None]) -> Path | Non
     """``--out`` checked before any work by the out-file rule
     (:func:`slipkit._files.check_out_file`): not an input, not inside a dataset, run or
     bundle, and an existing file only when it holds earlier results."""
-    from slipkit._files import check_out_file
-
     if not out:
         return None
     return check_out_file(
@@ -509,8 +503,6 @@ def write_json_out(
     path: Path, res: dict[str, Any], inputs: dict[str, str | None]
 ) -> None:
     """Write ``res`` to ``--out`` (checked again, then written atomically)."""
-    from slipkit._files import write_out_file
-
     write_out_file(
         path,
         json.dumps(res, indent=2),

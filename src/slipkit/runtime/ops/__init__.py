@@ -36,9 +36,7 @@ def load_entry_points() -> list[str]:
     ):
         try:
             ep.load()
-        except (
-            Exception
-        ) as exc:  # a third-party module: any error is reported, not fatal
+        except Exception as exc:  # third-party code: any error is reported, not fatal
             warnings.warn(
                 f"runtime ops of entry point {ep.name!r} ({ep.value}) of group "
                 f"{ENTRY_POINT_GROUP!r} not loaded: {type(exc).__name__}: {exc}",
